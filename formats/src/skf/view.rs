@@ -1,0 +1,787 @@
+//! Zero-copy, allocation-free validation and reading of `.skf` bytes.
+
+use core::fmt;
+
+use glam::{Mat4, Quat, Vec3};
+use half::f16;
+
+use super::config::{ModelConfig, Net, SkfConfigError};
+use super::*;
+use crate::math::Transform;
+
+/// A tensor name as stored (up to 24 bytes of UTF-8, zero padded).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct TensorName(pub [u8; 24]);
+
+impl TensorName {
+    /// The name as text (empty when it is not UTF-8).
+    #[must_use]
+    pub fn as_str(&self) -> &str {
+        let end = self.0.iter().position(|&b| b == 0).unwrap_or(24);
+        core::str::from_utf8(&self.0[..end]).unwrap_or("")
+    }
+
+    /// Builds a stored name from text (`None` when longer than 24 bytes or empty).
+    #[must_use]
+    pub fn new(name: &str) -> Option<Self> {
+        let b = name.as_bytes();
+        if b.is_empty() || b.len() > 24 || b.contains(&0) {
+            return None;
+        }
+        let mut n = [0; 24];
+        n[..b.len()].copy_from_slice(b);
+        Some(Self(n))
+    }
+}
+
+impl fmt::Debug for TensorName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:?}", self.as_str())
+    }
+}
+
+impl fmt::Display for TensorName {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Why `.skf` bytes were refused. Each failure has its own variant.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum SkfError {
+    /// Fewer bytes than the header or the section table need.
+    #[error("file is truncated: {needed} bytes needed, {len} present")]
+    Truncated {
+        /// Bytes needed.
+        needed: u64,
+        /// Bytes present.
+        len: u64,
+    },
+    /// The magic bytes are wrong.
+    #[error("not a .skf file (bad magic)")]
+    BadMagic,
+    /// A major version this reader does not know.
+    #[error("unsupported .skf version {major}.{minor}")]
+    UnsupportedVersion {
+        /// Major version.
+        major: u16,
+        /// Minor version.
+        minor: u16,
+    },
+    /// The header's `file_len` differs from the number of bytes.
+    #[error("header declares {declared} bytes but the file has {actual}")]
+    LengthMismatch {
+        /// Declared length.
+        declared: u64,
+        /// Actual length.
+        actual: u64,
+    },
+    /// The file is larger than [`MAX_FILE_LEN`].
+    #[error("file of {0} bytes exceeds the cap")]
+    TooLarge(u64),
+    /// Checksum mismatch (corruption).
+    #[error("checksum mismatch: stored {stored:#018x}, computed {computed:#018x}")]
+    Checksum {
+        /// Stored value.
+        stored: u64,
+        /// Computed value.
+        computed: u64,
+    },
+    /// Reserved header or table bytes are not zero.
+    #[error("reserved bytes at offset {0} are not zero")]
+    ReservedNonZero(u64),
+    /// Zero sections or more than [`MAX_SECTIONS`].
+    #[error("section count {0} is out of range")]
+    SectionCount(u32),
+    /// A section does not start on a 64-byte boundary or precedes the end of the previous one.
+    #[error("section `{tag}` at offset {offset} is misplaced")]
+    SectionPlacement {
+        /// Section tag.
+        tag: Tag,
+        /// Its offset.
+        offset: u64,
+    },
+    /// A section runs past the end of the file.
+    #[error("section `{tag}` runs past the end of the file")]
+    SectionOutOfBounds {
+        /// Section tag.
+        tag: Tag,
+    },
+    /// Bytes between or after sections that no section covers (and are not short zero padding).
+    #[error("{len} bytes at offset {offset} are not covered by any section")]
+    Uncovered {
+        /// Offset of the gap.
+        offset: u64,
+        /// Its length.
+        len: u64,
+    },
+    /// A required section is missing.
+    #[error("section `{0}` is missing")]
+    MissingSection(Tag),
+    /// A section appears twice.
+    #[error("section `{0}` appears twice")]
+    DuplicateSection(Tag),
+    /// A section has the wrong length for its contents.
+    #[error("section `{tag}` is {len} bytes, expected {expected}")]
+    SectionLength {
+        /// Section tag.
+        tag: Tag,
+        /// Its length.
+        len: u64,
+        /// Length implied by its contents.
+        expected: u64,
+    },
+    /// The CONF section is invalid.
+    #[error(transparent)]
+    Config(#[from] SkfConfigError),
+    /// The skeleton's joint count differs from CONF's or exceeds the cap.
+    #[error("SKEL has {skel} joints, CONF says {conf}")]
+    JointCount {
+        /// SKEL's count.
+        skel: u32,
+        /// CONF's count.
+        conf: u32,
+    },
+    /// A joint's parent is not an earlier joint.
+    #[error("SKEL joint {0} has an invalid parent")]
+    BadParent(u32),
+    /// A joint's name is out of the names block or not UTF-8.
+    #[error("SKEL joint {0} has an invalid name")]
+    BadJointName(u32),
+    /// A skeleton transform is NaN or infinite.
+    #[error("SKEL joint {0} has a non-finite transform")]
+    NonFiniteJoint(u32),
+    /// More tensors than [`MAX_TENSORS`].
+    #[error("tensor count {0} exceeds the cap")]
+    TensorCount(u32),
+    /// A tensor name is empty, not UTF-8, or repeated.
+    #[error("tensor entry {0} has an invalid or repeated name")]
+    BadTensorName(u32),
+    /// Unknown dtype code.
+    #[error("tensor `{name}` has unknown dtype {code}")]
+    BadDtype {
+        /// Tensor name.
+        name: TensorName,
+        /// The code.
+        code: u32,
+    },
+    /// Rank not 1 or 2, or a zero dimension, or unused dims not zero.
+    #[error("tensor `{0}` has an invalid shape")]
+    BadShape(TensorName),
+    /// `nbytes` does not equal the element count times the dtype size.
+    #[error("tensor `{0}` declares a byte size that does not match its shape")]
+    ByteSize(TensorName),
+    /// Tensor bytes out of DATA, misaligned, overlapping, or not in offset order.
+    #[error("tensor `{0}` is misplaced in DATA")]
+    TensorPlacement(TensorName),
+    /// A tensor the configured networks need is missing.
+    #[error("tensor `{0}` is missing")]
+    MissingTensor(TensorName),
+    /// A network tensor has a shape other than the one CONF implies.
+    #[error("tensor `{name}` has shape {got:?}, expected {expected:?}")]
+    TensorShape {
+        /// Tensor name.
+        name: TensorName,
+        /// Stored dims.
+        got: [u32; 2],
+        /// Expected dims.
+        expected: [u32; 2],
+    },
+    /// A caller's output buffer has the wrong length.
+    #[error("output buffer has {len} entries, expected {expected}")]
+    OutputLength {
+        /// Its length.
+        len: usize,
+        /// Expected.
+        expected: usize,
+    },
+}
+
+/// A four-byte section tag.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct Tag(pub [u8; 4]);
+
+impl fmt::Debug for Tag {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(self, f)
+    }
+}
+
+impl fmt::Display for Tag {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for &b in &self.0 {
+            let c = if b.is_ascii_graphic() { b as char } else { '?' };
+            write!(f, "{c}")?;
+        }
+        Ok(())
+    }
+}
+
+/// Element type of a tensor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dtype {
+    /// IEEE half precision.
+    F16,
+    /// IEEE single precision.
+    F32,
+}
+
+impl Dtype {
+    /// Stored code.
+    #[must_use]
+    pub fn code(self) -> u32 {
+        match self {
+            Dtype::F16 => 1,
+            Dtype::F32 => 2,
+        }
+    }
+
+    /// Bytes per element.
+    #[must_use]
+    pub fn size(self) -> usize {
+        match self {
+            Dtype::F16 => 2,
+            Dtype::F32 => 4,
+        }
+    }
+
+    fn from_code(c: u32) -> Option<Self> {
+        match c {
+            1 => Some(Dtype::F16),
+            2 => Some(Dtype::F32),
+            _ => None,
+        }
+    }
+}
+
+/// A tensor borrowed from the file bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct TensorView<'a> {
+    /// Name.
+    pub name: TensorName,
+    /// Element type.
+    pub dtype: Dtype,
+    /// Rank (1 or 2).
+    pub rank: u32,
+    /// Dimensions (`[n, 0]` for rank 1, `[out, in]` for weights).
+    pub dims: [u32; 2],
+    /// Raw little-endian bytes.
+    pub bytes: &'a [u8],
+}
+
+impl<'a> TensorView<'a> {
+    /// Number of elements.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.bytes.len() / self.dtype.size()
+    }
+
+    /// True for a tensor without elements (never, for a validated file).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
+
+    /// The elements in place, when the dtype is f16 and the buffer is 2-byte aligned on a
+    /// little-endian machine.
+    #[must_use]
+    pub fn as_f16(&self) -> Option<&'a [f16]> {
+        if self.dtype != Dtype::F16 || cfg!(target_endian = "big") {
+            return None;
+        }
+        bytemuck::try_cast_slice(self.bytes).ok()
+    }
+
+    /// Element `i` as f32 (`None` out of range).
+    #[must_use]
+    pub fn get(&self, i: usize) -> Option<f32> {
+        let s = self.dtype.size();
+        let b = self.bytes.get(i.checked_mul(s)?..i.checked_mul(s)?.checked_add(s)?)?;
+        Some(match self.dtype {
+            Dtype::F16 => f16::from_le_bytes([b[0], b[1]]).to_f32(),
+            Dtype::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        })
+    }
+
+    /// Expands every element to f32 into `out` (length = [`TensorView::len`]).
+    pub fn to_f32(&self, out: &mut [f32]) -> Result<(), SkfError> {
+        if out.len() != self.len() {
+            return Err(SkfError::OutputLength { len: out.len(), expected: self.len() });
+        }
+        match self.dtype {
+            Dtype::F16 => {
+                for (o, b) in out.iter_mut().zip(self.bytes.chunks_exact(2)) {
+                    *o = f16::from_le_bytes([b[0], b[1]]).to_f32();
+                }
+            }
+            Dtype::F32 => {
+                for (o, b) in out.iter_mut().zip(self.bytes.chunks_exact(4)) {
+                    *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The skeleton stored in a `.skf`, borrowed.
+#[derive(Clone, Copy, Debug)]
+pub struct SkeletonView<'a> {
+    records: &'a [u8],
+    names: &'a [u8],
+    base: Mat4,
+    count: usize,
+}
+
+impl<'a> SkeletonView<'a> {
+    /// Number of joints.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// True when there are no joints (never, for a validated file).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    fn record(&self, j: usize) -> &'a [u8] {
+        &self.records[j * JOINT_RECORD_LEN..(j + 1) * JOINT_RECORD_LEN]
+    }
+
+    /// Name of joint `j` (panics when `j >= len()`, like slice indexing).
+    #[must_use]
+    pub fn name(&self, j: usize) -> &'a str {
+        let r = self.record(j);
+        let (off, len) = (le_u32(r, 4) as usize, le_u32(r, 8) as usize);
+        // Validated at parse time.
+        core::str::from_utf8(&self.names[off..off + len]).unwrap_or("")
+    }
+
+    /// Parent of joint `j`.
+    #[must_use]
+    pub fn parent(&self, j: usize) -> Option<usize> {
+        let p = le_u32(self.record(j), 0);
+        (p != u32::MAX).then_some(p as usize)
+    }
+
+    /// Bind-pose local transform of joint `j`.
+    #[must_use]
+    pub fn bind_local(&self, j: usize) -> Transform {
+        let r = self.record(j);
+        let f = |k: usize| le_f32(r, 16 + 4 * k);
+        Transform {
+            translation: Vec3::new(f(0), f(1), f(2)),
+            rotation: Quat::from_xyzw(f(3), f(4), f(5), f(6)),
+            scale: Vec3::new(f(7), f(8), f(9)),
+        }
+    }
+
+    /// Inverse bind matrix of joint `j`.
+    #[must_use]
+    pub fn inverse_bind(&self, j: usize) -> Mat4 {
+        let r = self.record(j);
+        Mat4::from_cols_array(&core::array::from_fn(|k| le_f32(r, 56 + 4 * k)))
+    }
+
+    /// Transform above every root.
+    #[must_use]
+    pub fn base(&self) -> Mat4 {
+        self.base
+    }
+
+    /// Copies the skeleton into an owned [`crate::Skeleton`] (all joints [`crate::JointDofs::Free`]).
+    pub fn to_skeleton(&self) -> Result<crate::Skeleton, crate::SkeletonError> {
+        use alloc::string::ToString;
+        crate::Skeleton::new(
+            (0..self.count).map(|j| self.name(j).to_string()).collect(),
+            (0..self.count).map(|j| self.parent(j)).collect(),
+            (0..self.count).map(|j| self.bind_local(j)).collect(),
+            Some((0..self.count).map(|j| self.inverse_bind(j)).collect()),
+            None,
+            self.base,
+        )
+    }
+}
+
+/// A validated `.skf` file borrowed from its bytes.
+#[derive(Clone, Copy, Debug)]
+pub struct SkfView<'a> {
+    config: ModelConfig,
+    skeleton: SkeletonView<'a>,
+    table: &'a [u8],
+    data: &'a [u8],
+    minor: u16,
+}
+
+fn le_u16(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([b[at], b[at + 1]])
+}
+
+fn le_u32(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+fn le_u64(b: &[u8], at: usize) -> u64 {
+    let mut a = [0; 8];
+    a.copy_from_slice(&b[at..at + 8]);
+    u64::from_le_bytes(a)
+}
+
+fn le_f32(b: &[u8], at: usize) -> f32 {
+    f32::from_bits(le_u32(b, at))
+}
+
+/// Checks that `[start, end)` is fewer than [`ALIGN`] zero bytes.
+fn check_padding(bytes: &[u8], start: usize, end: usize) -> Result<(), SkfError> {
+    if end < start || end - start >= ALIGN || bytes[start..end].iter().any(|&b| b != 0) {
+        return Err(SkfError::Uncovered { offset: start as u64, len: end.saturating_sub(start) as u64 });
+    }
+    Ok(())
+}
+
+impl<'a> SkfView<'a> {
+    /// Validates `bytes` completely (header, checksum, sections, coverage, config, skeleton,
+    /// tensor table, network shapes) and returns a view; never allocates or panics.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, SkfError> {
+        let len = bytes.len() as u64;
+        if bytes.len() < HEADER_LEN {
+            return Err(SkfError::Truncated { needed: HEADER_LEN as u64, len });
+        }
+        if bytes[..8] != MAGIC {
+            return Err(SkfError::BadMagic);
+        }
+        let (major, minor) = (le_u16(bytes, 8), le_u16(bytes, 10));
+        if major != VERSION_MAJOR {
+            return Err(SkfError::UnsupportedVersion { major, minor });
+        }
+        let section_count = le_u32(bytes, 12);
+        let declared = le_u64(bytes, 16);
+        if declared > MAX_FILE_LEN {
+            return Err(SkfError::TooLarge(declared));
+        }
+        if declared != len {
+            return Err(if declared > len {
+                SkfError::Truncated { needed: declared, len }
+            } else {
+                SkfError::LengthMismatch { declared, actual: len }
+            });
+        }
+        let stored = le_u64(bytes, 24);
+        let computed = file_checksum(bytes);
+        if stored != computed {
+            return Err(SkfError::Checksum { stored, computed });
+        }
+        if let Some(k) = bytes[32..HEADER_LEN].iter().position(|&b| b != 0) {
+            return Err(SkfError::ReservedNonZero((32 + k) as u64));
+        }
+        if section_count == 0 || section_count as usize > MAX_SECTIONS {
+            return Err(SkfError::SectionCount(section_count));
+        }
+        // Bounded by MAX_SECTIONS: cannot overflow.
+        let table_end = HEADER_LEN + SECTION_ENTRY_LEN * section_count as usize;
+        if bytes.len() < table_end {
+            return Err(SkfError::Truncated { needed: table_end as u64, len });
+        }
+        let mut found: [Option<&[u8]>; 4] = [None; 4];
+        let mut cursor = table_end;
+        for s in 0..section_count as usize {
+            let e = &bytes[HEADER_LEN + s * SECTION_ENTRY_LEN..HEADER_LEN + (s + 1) * SECTION_ENTRY_LEN];
+            let tag = Tag([e[0], e[1], e[2], e[3]]);
+            let (offset, slen) = (le_u64(e, 8), le_u64(e, 16));
+            if le_u32(e, 4) != 0 || le_u64(e, 24) != 0 {
+                return Err(SkfError::ReservedNonZero((HEADER_LEN + s * SECTION_ENTRY_LEN) as u64));
+            }
+            let end = offset.checked_add(slen).filter(|&end| end <= len).ok_or(SkfError::SectionOutOfBounds { tag })?;
+            // Both fit in usize: they are <= len.
+            let (offset, end) = (offset as usize, end as usize);
+            if offset % ALIGN != 0 || offset < cursor {
+                return Err(SkfError::SectionPlacement { tag, offset: offset as u64 });
+            }
+            check_padding(bytes, cursor, offset)?;
+            cursor = end;
+            let slot = match tag.0 {
+                tag::CONF => 0,
+                tag::SKEL => 1,
+                tag::TINF => 2,
+                tag::DATA => 3,
+                _ => continue,
+            };
+            if found[slot].is_some() {
+                return Err(SkfError::DuplicateSection(tag));
+            }
+            found[slot] = Some(&bytes[offset..end]);
+        }
+        if cursor != bytes.len() {
+            return Err(SkfError::Uncovered { offset: cursor as u64, len: len - cursor as u64 });
+        }
+        let tags = [tag::CONF, tag::SKEL, tag::TINF, tag::DATA];
+        let get = |k: usize| found[k].ok_or(SkfError::MissingSection(Tag(tags[k])));
+        let (conf, skel, tinf, data) = (get(0)?, get(1)?, get(2)?, get(3)?);
+
+        if conf.len() != CONF_LEN {
+            return Err(SkfError::SectionLength { tag: Tag(tag::CONF), len: conf.len() as u64, expected: CONF_LEN as u64 });
+        }
+        let config = ModelConfig::from_bytes(conf)?;
+        let skeleton = Self::parse_skeleton(skel, &config)?;
+        let table = Self::parse_table(tinf, data)?;
+        let view = Self { config, skeleton, table, data, minor };
+        for net in [Net::Skin, Net::Albedo, Net::Shadow] {
+            if config.nets & net.bit() != 0 {
+                view.check_net(net)?;
+            }
+        }
+        Ok(view)
+    }
+
+    fn parse_skeleton(skel: &'a [u8], config: &ModelConfig) -> Result<SkeletonView<'a>, SkfError> {
+        let tag = Tag(tag::SKEL);
+        if skel.len() < SKEL_HEADER_LEN {
+            return Err(SkfError::SectionLength { tag, len: skel.len() as u64, expected: SKEL_HEADER_LEN as u64 });
+        }
+        let count = le_u32(skel, 0);
+        let names_len = le_u32(skel, 4) as usize;
+        if le_u32(skel, 8) != 0 || le_u32(skel, 12) != 0 {
+            return Err(SkfError::ReservedNonZero(8));
+        }
+        if count != config.joint_count {
+            return Err(SkfError::JointCount { skel: count, conf: config.joint_count });
+        }
+        // joint_count <= MAX_JOINTS and names_len <= MAX_NAMES_LEN keep this far from overflow.
+        if names_len > MAX_NAMES_LEN {
+            return Err(SkfError::SectionLength { tag, len: skel.len() as u64, expected: MAX_NAMES_LEN as u64 });
+        }
+        let records_len = JOINT_RECORD_LEN * count as usize;
+        let expected = SKEL_HEADER_LEN + records_len + names_len;
+        if skel.len() != expected {
+            return Err(SkfError::SectionLength { tag, len: skel.len() as u64, expected: expected as u64 });
+        }
+        let base = Mat4::from_cols_array(&core::array::from_fn(|k| le_f32(skel, 16 + 4 * k)));
+        if !base.is_finite() {
+            return Err(SkfError::NonFiniteJoint(0));
+        }
+        let view = SkeletonView {
+            records: &skel[SKEL_HEADER_LEN..SKEL_HEADER_LEN + records_len],
+            names: &skel[SKEL_HEADER_LEN + records_len..],
+            base,
+            count: count as usize,
+        };
+        for j in 0..count as usize {
+            let r = view.record(j);
+            let parent = le_u32(r, 0);
+            if parent != u32::MAX && parent as usize >= j {
+                return Err(SkfError::BadParent(j as u32));
+            }
+            let (off, nlen) = (le_u32(r, 4) as usize, le_u32(r, 8) as usize);
+            let name = off.checked_add(nlen).and_then(|end| view.names.get(off..end));
+            match name.map(core::str::from_utf8) {
+                Some(Ok(s)) if !s.is_empty() => {}
+                _ => return Err(SkfError::BadJointName(j as u32)),
+            }
+            if le_u32(r, 12) != 0 || r[120..].iter().any(|&b| b != 0) {
+                return Err(SkfError::ReservedNonZero(j as u64));
+            }
+            if (4..30).any(|k| !le_f32(r, 4 * k).is_finite()) {
+                return Err(SkfError::NonFiniteJoint(j as u32));
+            }
+        }
+        Ok(view)
+    }
+
+    fn parse_table(tinf: &'a [u8], data: &'a [u8]) -> Result<&'a [u8], SkfError> {
+        let tag = Tag(tag::TINF);
+        if tinf.len() < 8 {
+            return Err(SkfError::SectionLength { tag, len: tinf.len() as u64, expected: 8 });
+        }
+        let count = le_u32(tinf, 0);
+        if le_u32(tinf, 4) != 0 {
+            return Err(SkfError::ReservedNonZero(4));
+        }
+        if count as usize > MAX_TENSORS {
+            return Err(SkfError::TensorCount(count));
+        }
+        let expected = 8 + TENSOR_ENTRY_LEN * count as usize;
+        if tinf.len() != expected {
+            return Err(SkfError::SectionLength { tag, len: tinf.len() as u64, expected: expected as u64 });
+        }
+        let table = &tinf[8..];
+        let mut cursor = 0usize;
+        for i in 0..count as usize {
+            let t = entry(table, i);
+            let name = t.name;
+            if name.as_str().is_empty() || (0..i).any(|k| entry(table, k).name == name) {
+                return Err(SkfError::BadTensorName(i as u32));
+            }
+            let dtype = Dtype::from_code(t.dtype).ok_or(SkfError::BadDtype { name, code: t.dtype })?;
+            let [d0, d1] = t.dims;
+            let shape_ok = match t.rank {
+                1 => d0 > 0 && d1 == 0,
+                2 => d0 > 0 && d1 > 0,
+                _ => false,
+            } && t.extra_dims == [0, 0]
+                && t.reserved == 0;
+            if !shape_ok {
+                return Err(SkfError::BadShape(name));
+            }
+            let elems = u64::from(d0) * u64::from(d1.max(1));
+            if elems.checked_mul(dtype.size() as u64) != Some(t.nbytes) {
+                return Err(SkfError::ByteSize(name));
+            }
+            let end = t.offset.checked_add(t.nbytes).filter(|&e| e <= data.len() as u64);
+            let Some(end) = end else {
+                return Err(SkfError::TensorPlacement(name));
+            };
+            let (offset, end) = (t.offset as usize, end as usize);
+            if offset % ALIGN != 0 || offset < cursor || check_padding(data, cursor, offset).is_err() {
+                return Err(SkfError::TensorPlacement(name));
+            }
+            cursor = end;
+        }
+        if cursor != data.len() {
+            return Err(SkfError::Uncovered { offset: cursor as u64, len: (data.len() - cursor) as u64 });
+        }
+        Ok(table)
+    }
+
+    fn check_net(&self, net: Net) -> Result<(), SkfError> {
+        let n = self.config.hidden_widths().len();
+        for (i, (out, inp)) in self.config.layer_shapes(net).enumerate() {
+            let layer = if i < n { LayerName::Hidden(i) } else { LayerName::Out };
+            for (kind, expected) in [("weight", [out as u32, inp as u32]), ("bias", [out as u32, 0])] {
+                let name = tensor_name(net, layer, kind);
+                let t = self.tensor_by(&name).ok_or(SkfError::MissingTensor(name))?;
+                if t.dims != expected {
+                    return Err(SkfError::TensorShape { name, got: t.dims, expected });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn tensor_by(&self, name: &TensorName) -> Option<TensorView<'a>> {
+        (0..self.table.len() / TENSOR_ENTRY_LEN).map(|i| self.tensor_at(i)).find(|t| t.name == *name)
+    }
+
+    fn tensor_at(&self, i: usize) -> TensorView<'a> {
+        let e = entry(self.table, i);
+        // Validated at parse time.
+        let dtype = Dtype::from_code(e.dtype).unwrap_or(Dtype::F16);
+        let (start, end) = (e.offset as usize, (e.offset + e.nbytes) as usize);
+        TensorView { name: e.name, dtype, rank: e.rank, dims: e.dims, bytes: &self.data[start..end] }
+    }
+
+    /// Network configuration.
+    #[must_use]
+    pub fn config(&self) -> &ModelConfig {
+        &self.config
+    }
+
+    /// Minor version of the file.
+    #[must_use]
+    pub fn minor_version(&self) -> u16 {
+        self.minor
+    }
+
+    /// The stored skeleton (joint order = SkinNet output order = pose-feature order).
+    #[must_use]
+    pub fn skeleton(&self) -> SkeletonView<'a> {
+        self.skeleton
+    }
+
+    /// Number of tensors.
+    #[must_use]
+    pub fn tensor_count(&self) -> usize {
+        self.table.len() / TENSOR_ENTRY_LEN
+    }
+
+    /// Tensor by name.
+    #[must_use]
+    pub fn tensor(&self, name: &str) -> Option<TensorView<'a>> {
+        self.tensor_by(&TensorName::new(name)?)
+    }
+
+    /// All tensors in table order.
+    pub fn tensors(&self) -> impl Iterator<Item = TensorView<'a>> + '_ {
+        (0..self.tensor_count()).map(|i| self.tensor_at(i))
+    }
+
+    /// Weight (`[out, in]`) and bias of layer `layer` of `net` (hidden layers `0..n`, then the
+    /// output layer at index `n`); `None` when the net is not stored or the index is too large.
+    #[must_use]
+    pub fn layer(&self, net: Net, layer: usize) -> Option<(TensorView<'a>, TensorView<'a>)> {
+        if self.config.nets & net.bit() == 0 {
+            return None;
+        }
+        let n = self.config.hidden_widths().len();
+        let l = match layer.cmp(&n) {
+            core::cmp::Ordering::Less => LayerName::Hidden(layer),
+            core::cmp::Ordering::Equal => LayerName::Out,
+            core::cmp::Ordering::Greater => return None,
+        };
+        Some((self.tensor_by(&tensor_name(net, l, "weight"))?, self.tensor_by(&tensor_name(net, l, "bias"))?))
+    }
+}
+
+struct Entry {
+    name: TensorName,
+    dtype: u32,
+    rank: u32,
+    dims: [u32; 2],
+    extra_dims: [u32; 2],
+    offset: u64,
+    nbytes: u64,
+    reserved: u64,
+}
+
+// Entry layout: name [u8;24] | dtype u32 | rank u32 | dims [u32;4] | offset u64 | nbytes u64.
+// The fourth dims slot doubles as reserved space: rank ≤ 2 is all version 1 writes.
+fn entry(table: &[u8], i: usize) -> Entry {
+    let e = &table[i * TENSOR_ENTRY_LEN..(i + 1) * TENSOR_ENTRY_LEN];
+    let mut name = [0; 24];
+    name.copy_from_slice(&e[..24]);
+    Entry {
+        name: TensorName(name),
+        dtype: le_u32(e, 24),
+        rank: le_u32(e, 28),
+        dims: [le_u32(e, 32), le_u32(e, 36)],
+        extra_dims: [le_u32(e, 40), le_u32(e, 44)],
+        offset: le_u64(e, 48),
+        nbytes: le_u64(e, 56),
+        reserved: 0,
+    }
+}
+
+/// Which linear layer of a network.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LayerName {
+    /// Hidden layer `i`.
+    Hidden(usize),
+    /// The output layer.
+    Out,
+}
+
+/// `"{net}.l{i}.{kind}"` or `"{net}.out.{kind}"`, e.g. `skin.l2.weight`.
+pub(crate) fn tensor_name(net: Net, layer: LayerName, kind: &str) -> TensorName {
+    let mut buf = [0u8; 24];
+    let mut n = 0;
+    let mut push = |s: &[u8]| {
+        for &b in s {
+            if n < 24 {
+                buf[n] = b;
+                n += 1;
+            }
+        }
+    };
+    push(net.prefix().as_bytes());
+    match layer {
+        LayerName::Hidden(i) => {
+            push(b".l");
+            push(&[b'0' + (i % 10) as u8]);
+        }
+        LayerName::Out => push(b".out"),
+    }
+    push(b".");
+    push(kind.as_bytes());
+    TensorName(buf)
+}

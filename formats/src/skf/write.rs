@@ -1,0 +1,191 @@
+//! Building `.skf` bytes and writing them atomically.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use half::f16;
+
+use super::config::{ModelConfig, Net};
+use super::view::{Dtype, LayerName, SkfError, SkfView, TensorName, tensor_name};
+use super::*;
+use crate::skeleton::Skeleton;
+
+/// An owned model ready to be written: configuration, skeleton and f32 tensors (stored as f16).
+#[derive(Clone, Debug)]
+pub struct SkfModel {
+    /// Network configuration.
+    pub config: ModelConfig,
+    /// Skeleton (its joint order is SkinNet's output order).
+    pub skeleton: Skeleton,
+    /// `(name, dims, values)`; dims `[n]` or `[out, in]`.
+    pub tensors: Vec<(String, Vec<usize>, Vec<f32>)>,
+}
+
+/// A `.skf` read or write failure, naming the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SkfFileError {
+    /// The file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The bytes are not a valid `.skf`.
+    #[error("{path}: {source}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: SkfError,
+    },
+    /// The model to write is inconsistent (a tensor name too long, a shape mismatch, …).
+    #[error("cannot write .skf: {0}")]
+    Invalid(String),
+}
+
+impl SkfModel {
+    /// Adds the weight and bias of layer `layer` of `net` (`layer == hidden count` is the output
+    /// layer); `weight` is row-major `[out, in]`.
+    pub fn push_layer(&mut self, net: Net, layer: usize, weight: Vec<f32>, out: usize, inp: usize, bias: Vec<f32>) {
+        let n = self.config.hidden_widths().len();
+        let l = if layer < n { LayerName::Hidden(layer) } else { LayerName::Out };
+        self.tensors.push((tensor_name(net, l, "weight").as_str().to_string(), vec![out, inp], weight));
+        self.tensors.push((tensor_name(net, l, "bias").as_str().to_string(), vec![out], bias));
+    }
+
+    /// Serialises the model (tensors as f16) and checks the result with [`SkfView::parse`].
+    pub fn to_bytes(&self) -> Result<Vec<u8>, SkfFileError> {
+        let invalid = |m: String| SkfFileError::Invalid(m);
+        self.config.validate().map_err(|e| invalid(e.to_string()))?;
+        if self.skeleton.len() != self.config.joint_count as usize {
+            return Err(invalid(format!(
+                "skeleton has {} joints, config {}",
+                self.skeleton.len(),
+                self.config.joint_count
+            )));
+        }
+        // SKEL.
+        let mut names = Vec::new();
+        let mut records = Vec::new();
+        for j in 0..self.skeleton.len() {
+            let mut r = [0u8; JOINT_RECORD_LEN];
+            let parent = self.skeleton.parents()[j].map_or(u32::MAX, |p| p as u32);
+            let name = self.skeleton.names()[j].as_bytes();
+            r[0..4].copy_from_slice(&parent.to_le_bytes());
+            r[4..8].copy_from_slice(&(names.len() as u32).to_le_bytes());
+            r[8..12].copy_from_slice(&(name.len() as u32).to_le_bytes());
+            names.extend_from_slice(name);
+            let t = self.skeleton.bind_local()[j];
+            let floats = t.translation.to_array().into_iter().chain(t.rotation.to_array()).chain(t.scale.to_array());
+            for (k, f) in floats.chain(self.skeleton.inverse_bind()[j].to_cols_array()).enumerate() {
+                r[16 + 4 * k..20 + 4 * k].copy_from_slice(&f.to_le_bytes());
+            }
+            records.extend_from_slice(&r);
+        }
+        let mut skel = Vec::with_capacity(SKEL_HEADER_LEN + records.len() + names.len());
+        skel.extend_from_slice(&(self.skeleton.len() as u32).to_le_bytes());
+        skel.extend_from_slice(&(names.len() as u32).to_le_bytes());
+        skel.extend_from_slice(&[0; 8]);
+        for f in self.skeleton.base().to_cols_array() {
+            skel.extend_from_slice(&f.to_le_bytes());
+        }
+        skel.extend_from_slice(&records);
+        skel.extend_from_slice(&names);
+
+        // TINF + DATA.
+        let mut tinf = Vec::new();
+        tinf.extend_from_slice(&(self.tensors.len() as u32).to_le_bytes());
+        tinf.extend_from_slice(&[0; 4]);
+        let mut data: Vec<u8> = Vec::new();
+        for (name, dims, values) in &self.tensors {
+            let stored = TensorName::new(name).ok_or_else(|| invalid(format!("tensor name `{name}` is empty or over 24 bytes")))?;
+            let elems: usize = dims.iter().product();
+            if dims.is_empty() || dims.len() > 2 || elems != values.len() || elems == 0 {
+                return Err(invalid(format!("tensor `{name}` has dims {dims:?} but {} values", values.len())));
+            }
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(invalid(format!("tensor `{name}` has a non-finite value at {i}")));
+            }
+            let offset = align_up(data.len()).ok_or_else(|| invalid("DATA too large".into()))?;
+            data.resize(offset, 0);
+            for v in values {
+                data.extend_from_slice(&f16::from_f32(*v).to_le_bytes());
+            }
+            let mut e = [0u8; TENSOR_ENTRY_LEN];
+            e[..24].copy_from_slice(&stored.0);
+            e[24..28].copy_from_slice(&Dtype::F16.code().to_le_bytes());
+            e[28..32].copy_from_slice(&(dims.len() as u32).to_le_bytes());
+            for (k, d) in dims.iter().enumerate() {
+                e[32 + 4 * k..36 + 4 * k].copy_from_slice(&(*d as u32).to_le_bytes());
+            }
+            e[48..56].copy_from_slice(&(offset as u64).to_le_bytes());
+            e[56..64].copy_from_slice(&((2 * elems) as u64).to_le_bytes());
+            tinf.extend_from_slice(&e);
+        }
+
+        let conf = self.config.to_bytes();
+        let sections: [(&[u8; 4], &[u8]); 4] =
+            [(&tag::CONF, &conf), (&tag::SKEL, &skel), (&tag::TINF, &tinf), (&tag::DATA, &data)];
+        let mut out = vec![0u8; HEADER_LEN + SECTION_ENTRY_LEN * sections.len()];
+        for (s, (t, body)) in sections.iter().enumerate() {
+            let offset = align_up(out.len()).ok_or_else(|| invalid("file too large".into()))?;
+            out.resize(offset, 0);
+            out.extend_from_slice(body);
+            let e = HEADER_LEN + s * SECTION_ENTRY_LEN;
+            out[e..e + 4].copy_from_slice(*t);
+            out[e + 8..e + 16].copy_from_slice(&(offset as u64).to_le_bytes());
+            out[e + 16..e + 24].copy_from_slice(&(body.len() as u64).to_le_bytes());
+        }
+        out[..8].copy_from_slice(&MAGIC);
+        out[8..10].copy_from_slice(&VERSION_MAJOR.to_le_bytes());
+        out[10..12].copy_from_slice(&VERSION_MINOR.to_le_bytes());
+        out[12..16].copy_from_slice(&(sections.len() as u32).to_le_bytes());
+        let len = out.len() as u64;
+        out[16..24].copy_from_slice(&len.to_le_bytes());
+        let sum = file_checksum(&out);
+        out[24..32].copy_from_slice(&sum.to_le_bytes());
+        SkfView::parse(&out).map_err(|e| invalid(format!("written file does not validate: {e}")))?;
+        Ok(out)
+    }
+
+    /// Writes the model to `path` atomically.
+    pub fn write(&self, path: &Path) -> Result<(), SkfFileError> {
+        let bytes = self.to_bytes()?;
+        write_atomic(path, &bytes).map_err(|source| SkfFileError::Io { path: path.to_owned(), source })
+    }
+}
+
+/// Reads a whole `.skf` file and validates it, returning its bytes (parse them again with
+/// [`SkfView::parse`] to borrow; validation is cheap next to any use of the model).
+pub fn read_skf_file(path: &Path) -> Result<Vec<u8>, SkfFileError> {
+    let bytes = std::fs::read(path).map_err(|source| SkfFileError::Io { path: path.to_owned(), source })?;
+    SkfView::parse(&bytes).map_err(|source| SkfFileError::Format { path: path.to_owned(), source })?;
+    Ok(bytes)
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a
+/// reader never sees a partial file and a failure leaves any previous file intact.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    };
+    let file_name = path.file_name().ok_or_else(|| std::io::Error::other("path has no file name"))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(file_name);
+    tmp_name.push(format!(".{}.tmp", std::process::id()));
+    let tmp = dir.join(tmp_name);
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
