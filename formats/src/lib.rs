@@ -19,6 +19,8 @@ pub mod pose;
 pub mod skeleton;
 pub mod skf;
 pub mod skin;
+#[cfg(feature = "std")]
+pub mod shared_data;
 
 pub use camera::{Camera, CameraError, CameraRig, Distortion};
 pub use math::{Aabb, Transform};
