@@ -1,6 +1,37 @@
-//! The `trainer` command-line tool.
+//! The `trainer` command-line tool: one subcommand per module in `cli/`.
+//!
+//! Errors go to stderr as one line naming the file and what is wrong, with exit code 1.
+
+use clap::{Parser, Subcommand};
+
+mod cli;
+
+/// Skinfield trainer: bone heat, synthetic captures, SkinNet training, export, evaluation.
+#[derive(Parser)]
+#[command(name = "trainer", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print the version.
+    Version,
+    // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
+}
 
 fn main() {
-    eprintln!("trainer: no subcommand implemented yet");
-    std::process::exit(2);
+    let cli = Cli::parse();
+    let result: anyhow::Result<()> = match cli.command {
+        Command::Version => {
+            println!("{}", env!("CARGO_PKG_VERSION"));
+            Ok(())
+        }
+    };
+    if let Err(e) = result {
+        // One line: the context chain joined, so the file and the field are both named.
+        eprintln!("trainer: {e:#}");
+        std::process::exit(1);
+    }
 }

@@ -1,0 +1,1 @@
+//! One module per `trainer` subcommand: its clap `Args` and a `run(args) -> anyhow::Result<()>`.
