@@ -20,10 +20,25 @@ pub const LN2_HI: f32 = 0.693_359_4;
 /// Cody–Waite split of `ln 2`: low part.
 pub const LN2_LO: f32 = -2.121_944_4e-4;
 /// Cephes `expf` polynomial on `[-ln2/2, ln2/2]`, highest degree first: `exp(r) ≈ 1 + r + r²·P(r)`.
-pub const EXP_P: [f32; 6] = [1.987_569_1e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 5.000_000_1e-1];
+pub const EXP_P: [f32; 6] = [
+    1.987_569_1e-4,
+    1.398_199_9e-3,
+    8.333_452e-3,
+    4.166_579_6e-2,
+    1.666_666_5e-1,
+    5.000_000_1e-1,
+];
 /// `atanh` series `Σ z^k / (2k+1)`, highest degree first, for `log1p(y) = 2s·Q(s²)` with
 /// `s = y / (2 + y) ∈ [0, 1/3]` (truncation error below 1.5e-8 relative).
-pub const LOG1P_Q: [f32; 7] = [1.0 / 13.0, 1.0 / 11.0, 1.0 / 9.0, 1.0 / 7.0, 1.0 / 5.0, 1.0 / 3.0, 1.0];
+pub const LOG1P_Q: [f32; 7] = [
+    1.0 / 13.0,
+    1.0 / 11.0,
+    1.0 / 9.0,
+    1.0 / 7.0,
+    1.0 / 5.0,
+    1.0 / 3.0,
+    1.0,
+];
 
 /// The activation applied after a linear layer.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -128,8 +143,14 @@ mod tests {
                 // Defining formula, evaluated where it does not overflow.
                 let want = libm::log1p(libm::exp(bx)) / f64::from(beta);
                 let tol = 2e-6 * want.abs().max(1e-30) + 1e-12;
-                assert!((f64::from(softplus(x, beta)) - want).abs() <= tol, "libm {x} {beta}");
-                assert!((f64::from(softplus_poly(x, beta)) - want).abs() <= tol, "poly {x} {beta}");
+                assert!(
+                    (f64::from(softplus(x, beta)) - want).abs() <= tol,
+                    "libm {x} {beta}"
+                );
+                assert!(
+                    (f64::from(softplus_poly(x, beta)) - want).abs() <= tol,
+                    "poly {x} {beta}"
+                );
             }
         }
         // Large arguments: no overflow, identity.

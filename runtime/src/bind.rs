@@ -28,10 +28,18 @@ pub fn normalise(config: &ModelConfig, x: Vec3) -> Vec3 {
 /// The network's position input `[x̂, γ(x̂)]` into `out` (`3 + 6L` floats):
 /// `x̂`, then for `k in 0..L`: `sin(2^k π x̂)` (3), `cos(2^k π x̂)` (3). Evaluated in f64 and
 /// rounded, so it is the correctly rounded value of the definition.
-pub fn positional_encoding(x_hat: Vec3, frequencies: usize, out: &mut [f32]) -> Result<(), RuntimeError> {
+pub fn positional_encoding(
+    x_hat: Vec3,
+    frequencies: usize,
+    out: &mut [f32],
+) -> Result<(), RuntimeError> {
     let expected = 3 + 6 * frequencies;
     if out.len() != expected {
-        return Err(RuntimeError::BufferLength { field: "out", len: out.len(), expected });
+        return Err(RuntimeError::BufferLength {
+            field: "out",
+            len: out.len(),
+            expected,
+        });
     }
     out[..3].copy_from_slice(&x_hat.to_array());
     for k in 0..frequencies {
@@ -58,13 +66,19 @@ pub struct BoundMesh {
 impl BoundMesh {
     /// Binds canonical positions (any count ≥ 1, any order; points outside the file's box are
     /// allowed: the network extrapolates) to `model`.
-    pub fn bind<W: AsRef<[f32]>>(model: &SkinNet<W>, positions: &[Vec3]) -> Result<Self, RuntimeError> {
+    pub fn bind<W: AsRef<[f32]>>(
+        model: &SkinNet<W>,
+        positions: &[Vec3],
+    ) -> Result<Self, RuntimeError> {
         let n = positions.len();
         if n == 0 || n > MAX_BIND_VERTICES {
             return Err(RuntimeError::VertexCount(n));
         }
         if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
-            return Err(RuntimeError::NonFinite { field: "positions", index: i });
+            return Err(RuntimeError::NonFinite {
+                field: "positions",
+                index: i,
+            });
         }
         let layout = model.layout();
         let (pos_w, pre_rows) = (layout.pos_w, layout.pre_rows);
@@ -77,7 +91,10 @@ impl BoundMesh {
         let freqs = model.config().pe_frequencies as usize;
         for (t, out) in pre.chunks_exact_mut(block).enumerate() {
             pe.fill(0.0);
-            for (lane, p) in positions[t * TILE..n.min((t + 1) * TILE)].iter().enumerate() {
+            for (lane, p) in positions[t * TILE..n.min((t + 1) * TILE)]
+                .iter()
+                .enumerate()
+            {
                 positional_encoding(normalise(model.config(), *p), freqs, &mut one)?;
                 for (f, v) in one.iter().enumerate() {
                     pe[f * TILE + lane] = *v;
@@ -85,7 +102,12 @@ impl BoundMesh {
             }
             model.position_parts(&pe, &zeros, out);
         }
-        Ok(Self { model_id: model.id(), rest: positions.to_vec(), pre, pre_rows })
+        Ok(Self {
+            model_id: model.id(),
+            rest: positions.to_vec(),
+            pre,
+            pre_rows,
+        })
     }
 
     /// Number of vertices.

@@ -90,9 +90,16 @@ mod tests {
 
     #[test]
     fn messages_name_the_field() {
-        let e = RuntimeError::BufferLength { field: "out_normals", len: 3, expected: 4 };
+        let e = RuntimeError::BufferLength {
+            field: "out_normals",
+            len: 3,
+            expected: 4,
+        };
         assert_eq!(e.to_string(), "`out_normals` has 3 entries, expected 4");
-        let e = RuntimeError::Missing { field: "rest_normals", because: "out_normals" };
+        let e = RuntimeError::Missing {
+            field: "rest_normals",
+            because: "out_normals",
+        };
         assert!(e.to_string().contains("rest_normals"));
     }
 }

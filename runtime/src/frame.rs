@@ -24,7 +24,11 @@ impl Palette {
     /// A palette for `joints` joints (not ready until set).
     #[must_use]
     pub fn new(joints: usize) -> Self {
-        Self { matrices: vec![Mat4::IDENTITY; joints], dual_quats: vec![DualQuat::IDENTITY; joints], ready: false }
+        Self {
+            matrices: vec![Mat4::IDENTITY; joints],
+            dual_quats: vec![DualQuat::IDENTITY; joints],
+            ready: false,
+        }
     }
 
     /// Number of joints.
@@ -55,10 +59,17 @@ impl Palette {
     pub fn set_matrices(&mut self, matrices: &[Mat4]) -> Result<(), RuntimeError> {
         self.ready = false;
         if matrices.len() != self.matrices.len() {
-            return Err(RuntimeError::BufferLength { field: "matrices", len: matrices.len(), expected: self.matrices.len() });
+            return Err(RuntimeError::BufferLength {
+                field: "matrices",
+                len: matrices.len(),
+                expected: self.matrices.len(),
+            });
         }
         if let Some(j) = matrices.iter().position(|m| !m.is_finite()) {
-            return Err(RuntimeError::NonFinite { field: "matrices", index: j });
+            return Err(RuntimeError::NonFinite {
+                field: "matrices",
+                index: j,
+            });
         }
         self.matrices.copy_from_slice(matrices);
         self.finish()
@@ -68,11 +79,18 @@ impl Palette {
     pub fn set_pose(&mut self, skeleton: &Skeleton, pose: &Pose) -> Result<(), RuntimeError> {
         self.ready = false;
         if skeleton.len() != self.matrices.len() {
-            return Err(RuntimeError::BufferLength { field: "skeleton", len: skeleton.len(), expected: self.matrices.len() });
+            return Err(RuntimeError::BufferLength {
+                field: "skeleton",
+                len: skeleton.len(),
+                expected: self.matrices.len(),
+            });
         }
         skeleton.skinning_matrices(pose, &mut self.matrices)?;
         if let Some(j) = self.matrices.iter().position(|m| !m.is_finite()) {
-            return Err(RuntimeError::NonFinite { field: "pose", index: j });
+            return Err(RuntimeError::NonFinite {
+                field: "pose",
+                index: j,
+            });
         }
         self.finish()
     }
@@ -113,19 +131,34 @@ impl FrameState {
 
     /// Poses the frame: forward kinematics, pose features, pose terms. Never allocates; a NaN,
     /// infinite or wrongly sized pose is an error and leaves the frame not ready.
-    pub fn set_pose<W: AsRef<[f32]>>(&mut self, model: &SkinNet<W>, pose: &Pose) -> Result<(), RuntimeError> {
+    pub fn set_pose<W: AsRef<[f32]>>(
+        &mut self,
+        model: &SkinNet<W>,
+        pose: &Pose,
+    ) -> Result<(), RuntimeError> {
         self.ready = false;
         if model.id() != self.model_id {
             return Err(RuntimeError::Mismatch { field: "frame" });
         }
         self.palette.set_pose(model.skeleton(), pose)?;
-        pose_features(model.skeleton(), pose, model.config().up_axis, &mut self.features)?;
+        pose_features(
+            model.skeleton(),
+            pose,
+            model.config().up_axis,
+            &mut self.features,
+        )?;
         if let Some(i) = self.features.iter().position(|f| !f.is_finite()) {
-            return Err(RuntimeError::NonFinite { field: "pose features", index: i });
+            return Err(RuntimeError::NonFinite {
+                field: "pose features",
+                index: i,
+            });
         }
         model.frame_bias(&self.features, &mut self.frame_bias);
         if let Some(i) = self.frame_bias.iter().position(|f| !f.is_finite()) {
-            return Err(RuntimeError::NonFinite { field: "frame bias", index: i });
+            return Err(RuntimeError::NonFinite {
+                field: "frame bias",
+                index: i,
+            });
         }
         self.ready = true;
         Ok(())

@@ -39,7 +39,11 @@ impl Scratch {
 
     fn buffers(&mut self, need: usize) -> Result<(&mut [f32], &mut [f32]), RuntimeError> {
         if need > self.each {
-            return Err(RuntimeError::BufferLength { field: "scratch", len: self.each, expected: need });
+            return Err(RuntimeError::BufferLength {
+                field: "scratch",
+                len: self.each,
+                expected: need,
+            });
         }
         let (a, b) = self.buf[self.offset..self.offset + 2 * self.each].split_at_mut(self.each);
         Ok((a, b))
@@ -65,7 +69,11 @@ fn check_parts<W: AsRef<[f32]>>(
     }
     let n = mesh.vertex_count();
     if first.checked_add(count).is_none_or(|end| end > n) {
-        return Err(RuntimeError::Range { first, count, vertex_count: n });
+        return Err(RuntimeError::Range {
+            first,
+            count,
+            vertex_count: n,
+        });
     }
     Ok(())
 }
@@ -81,15 +89,26 @@ pub(crate) fn check_attr<A, B>(
 ) -> Result<(), RuntimeError> {
     if let Some(r) = rest {
         if r.len() != vertices {
-            return Err(RuntimeError::BufferLength { field: names.0, len: r.len(), expected: vertices });
+            return Err(RuntimeError::BufferLength {
+                field: names.0,
+                len: r.len(),
+                expected: vertices,
+            });
         }
     }
     if let Some(o) = out {
         if rest.is_none() {
-            return Err(RuntimeError::Missing { field: names.0, because: names.1 });
+            return Err(RuntimeError::Missing {
+                field: names.0,
+                because: names.1,
+            });
         }
         if o.len() != count {
-            return Err(RuntimeError::BufferLength { field: names.1, len: o.len(), expected: count });
+            return Err(RuntimeError::BufferLength {
+                field: names.1,
+                len: o.len(),
+                expected: count,
+            });
         }
     }
     Ok(())
@@ -127,12 +146,28 @@ impl<W: AsRef<[f32]>> SkinJob<'_, W> {
         let count = self.out_positions.len();
         check_parts(self.model, self.mesh, self.frame, self.first_vertex, count)?;
         let n = self.mesh.vertex_count();
-        check_attr(self.rest_normals, self.out_normals.as_deref(), ("rest_normals", "out_normals"), n, count)?;
-        check_attr(self.rest_tangents, self.out_tangents.as_deref(), ("rest_tangents", "out_tangents"), n, count)?;
+        check_attr(
+            self.rest_normals,
+            self.out_normals.as_deref(),
+            ("rest_normals", "out_normals"),
+            n,
+            count,
+        )?;
+        check_attr(
+            self.rest_tangents,
+            self.out_tangents.as_deref(),
+            ("rest_tangents", "out_tangents"),
+            n,
+            count,
+        )?;
         if let Some(w) = &self.out_weights {
             let expected = count * self.model.joint_count();
             if w.len() != expected {
-                return Err(RuntimeError::BufferLength { field: "out_weights", len: w.len(), expected });
+                return Err(RuntimeError::BufferLength {
+                    field: "out_weights",
+                    len: w.len(),
+                    expected,
+                });
             }
         }
         Ok(())
@@ -189,7 +224,11 @@ impl<'a, W> SkinJob<'a, W> {
         if at > self.out_positions.len() {
             return None;
         }
-        let j = if let Some(w) = &self.out_weights { w.len().checked_div(self.out_positions.len()).unwrap_or(0) } else { 0 };
+        let j = if let Some(w) = &self.out_weights {
+            w.len().checked_div(self.out_positions.len()).unwrap_or(0)
+        } else {
+            0
+        };
         if self.out_normals.as_ref().is_some_and(|o| o.len() < at)
             || self.out_tangents.as_ref().is_some_and(|o| o.len() < at)
             || self.out_weights.as_ref().is_some_and(|o| o.len() < at * j)
@@ -201,7 +240,8 @@ impl<'a, W> SkinJob<'a, W> {
         let (t0, t1) = split_opt(self.out_tangents, at);
         let (w0, w1) = split_opt(self.out_weights, at * j);
         let (model, mesh, frame, method) = (self.model, self.mesh, self.frame, self.method);
-        let (rest_normals, rest_tangents, first_vertex) = (self.rest_normals, self.rest_tangents, self.first_vertex);
+        let (rest_normals, rest_tangents, first_vertex) =
+            (self.rest_normals, self.rest_tangents, self.first_vertex);
         let head = SkinJob {
             model,
             mesh,
@@ -263,9 +303,19 @@ impl<W: AsRef<[f32]>> WeightsJob<'_, W> {
         let j = self.model.joint_count();
         if self.out_weights.len() % j != 0 {
             let expected = self.out_weights.len() / j * j;
-            return Err(RuntimeError::BufferLength { field: "out_weights", len: self.out_weights.len(), expected });
+            return Err(RuntimeError::BufferLength {
+                field: "out_weights",
+                len: self.out_weights.len(),
+                expected,
+            });
         }
-        check_parts(self.model, self.mesh, self.frame, self.first_vertex, self.out_weights.len() / j)
+        check_parts(
+            self.model,
+            self.mesh,
+            self.frame,
+            self.first_vertex,
+            self.out_weights.len() / j,
+        )
     }
 
     /// Validates, then evaluates the MLP over the range.
@@ -279,10 +329,15 @@ impl<W: AsRef<[f32]>> WeightsJob<'_, W> {
         let (a, b) = scratch.buffers(self.model.layout().max_rows_p * TILE)?;
         let (first, end) = (self.first_vertex, self.first_vertex + count);
         for t in first / TILE..=(end - 1) / TILE {
-            let w = self.model.forward_tile(self.mesh.tile(t), self.frame.frame_bias(), a, b);
+            let w = self
+                .model
+                .forward_tile(self.mesh.tile(t), self.frame.frame_bias(), a, b);
             for v in first.max(t * TILE)..end.min((t + 1) * TILE) {
                 let (lane, i) = (v - t * TILE, v - first);
-                for (j, dst) in self.out_weights[i * j_count..(i + 1) * j_count].iter_mut().enumerate() {
+                for (j, dst) in self.out_weights[i * j_count..(i + 1) * j_count]
+                    .iter_mut()
+                    .enumerate()
+                {
                     *dst = w[j * TILE + lane];
                 }
             }

@@ -79,8 +79,18 @@ impl Layout {
         for (i, (rows, inp)) in config.layer_shapes(Net::Skin).enumerate().take(MAX_LAYERS) {
             let rows_p = rows.div_ceil(MR) * MR;
             let sees_input = i == 0 || (i == skip && i > 0);
-            let k_h = if i == 0 { 0 } else { inp - if sees_input { pos_w + pose_w } else { 0 } };
-            let mut l = LayerLayout { rows, rows_p, k_h, h_off: total, ..LayerLayout::default() };
+            let k_h = if i == 0 {
+                0
+            } else {
+                inp - if sees_input { pos_w + pose_w } else { 0 }
+            };
+            let mut l = LayerLayout {
+                rows,
+                rows_p,
+                k_h,
+                h_off: total,
+                ..LayerLayout::default()
+            };
             total += rows_p * k_h;
             if sees_input {
                 l.pos_off = Some(total);
@@ -141,9 +151,33 @@ pub struct SkinNet<W> {
 pub type SkinNetModel = SkinNet<Vec<f32>>;
 
 fn tensor_name(i: usize, n: usize, weight: bool) -> &'static str {
-    const W: [&str; MAX_LAYERS] = ["skin.l0.weight", "skin.l1.weight", "skin.l2.weight", "skin.l3.weight", "skin.l4.weight", "skin.l5.weight", "skin.l6.weight", "skin.l7.weight", "skin.out.weight"];
-    const B: [&str; MAX_LAYERS] = ["skin.l0.bias", "skin.l1.bias", "skin.l2.bias", "skin.l3.bias", "skin.l4.bias", "skin.l5.bias", "skin.l6.bias", "skin.l7.bias", "skin.out.bias"];
-    let k = if i == n { MAX_LAYERS - 1 } else { i.min(MAX_LAYERS - 2) };
+    const W: [&str; MAX_LAYERS] = [
+        "skin.l0.weight",
+        "skin.l1.weight",
+        "skin.l2.weight",
+        "skin.l3.weight",
+        "skin.l4.weight",
+        "skin.l5.weight",
+        "skin.l6.weight",
+        "skin.l7.weight",
+        "skin.out.weight",
+    ];
+    const B: [&str; MAX_LAYERS] = [
+        "skin.l0.bias",
+        "skin.l1.bias",
+        "skin.l2.bias",
+        "skin.l3.bias",
+        "skin.l4.bias",
+        "skin.l5.bias",
+        "skin.l6.bias",
+        "skin.l7.bias",
+        "skin.out.bias",
+    ];
+    let k = if i == n {
+        MAX_LAYERS - 1
+    } else {
+        i.min(MAX_LAYERS - 2)
+    };
     if weight { W[k] } else { B[k] }
 }
 
@@ -151,7 +185,10 @@ fn tensor_name(i: usize, n: usize, weight: bool) -> &'static str {
 fn element(t: &TensorView<'_>, i: usize, name: &'static str) -> Result<f32, RuntimeError> {
     match t.get(i) {
         Some(v) if v.is_finite() => Ok(v),
-        _ => Err(RuntimeError::NonFiniteWeight { tensor: name, index: i }),
+        _ => Err(RuntimeError::NonFiniteWeight {
+            tensor: name,
+            index: i,
+        }),
     }
 }
 
@@ -159,7 +196,9 @@ fn element(t: &TensorView<'_>, i: usize, name: &'static str) -> Result<f32, Runt
 fn expand(view: &SkfView<'_>, layout: &Layout, out: &mut [f32]) -> Result<(), RuntimeError> {
     let n = layout.count - 1;
     for (i, l) in layout.layers().iter().enumerate() {
-        let (w, b) = view.layer(Net::Skin, i).ok_or(RuntimeError::Mismatch { field: "skin tensors" })?;
+        let (w, b) = view.layer(Net::Skin, i).ok_or(RuntimeError::Mismatch {
+            field: "skin tensors",
+        })?;
         let (wn, bn) = (tensor_name(i, n, true), tensor_name(i, n, false));
         let ld = w.dims[1] as usize;
         let h_cols = if i == 0 { 0 } else { l.k_h };
@@ -168,7 +207,9 @@ fn expand(view: &SkfView<'_>, layout: &Layout, out: &mut [f32]) -> Result<(), Ru
         pack_panels(l.rows, l.k_h, h, |o, c| element(&w, o * ld + c, wn))?;
         if let Some(pos_off) = l.pos_off {
             let pos = &mut out[pos_off..pos_off + l.rows_p * layout.pos_w];
-            pack_panels(l.rows, layout.pos_w, pos, |o, c| element(&w, o * ld + h_cols + c, wn))?;
+            pack_panels(l.rows, layout.pos_w, pos, |o, c| {
+                element(&w, o * ld + h_cols + c, wn)
+            })?;
             let pose = &mut out[l.pose_off..l.pose_off + l.rows * layout.pose_w];
             for (o, row) in pose.chunks_exact_mut(layout.pose_w).enumerate() {
                 for (c, v) in row.iter_mut().enumerate() {
@@ -176,7 +217,10 @@ fn expand(view: &SkfView<'_>, layout: &Layout, out: &mut [f32]) -> Result<(), Ru
                 }
             }
         }
-        for (o, v) in out[l.bias_off..l.bias_off + l.rows_p].iter_mut().enumerate() {
+        for (o, v) in out[l.bias_off..l.bias_off + l.rows_p]
+            .iter_mut()
+            .enumerate()
+        {
             *v = if o < l.rows { element(&b, o, bn)? } else { 0.0 };
         }
     }
@@ -193,13 +237,25 @@ impl SkinNetModel {
     pub fn from_view(view: &SkfView<'_>) -> Result<Self, RuntimeError> {
         let mut weights = vec![0.0; expanded_len(view.config())];
         let net = SkinNet::expand_into(view, &mut weights)?;
-        let (layout, config, skeleton, kernel, id) = (net.layout, net.config, net.skeleton, net.kernel, net.id);
-        Ok(SkinNet { weights, layout, config, skeleton, kernel, id })
+        let (layout, config, skeleton, kernel, id) =
+            (net.layout, net.config, net.skeleton, net.kernel, net.id);
+        Ok(SkinNet {
+            weights,
+            layout,
+            config,
+            skeleton,
+            kernel,
+            id,
+        })
     }
 
     /// Convenience for tests and exporters: the SkinNet weights (`J` per point, joint order of
     /// the file's skeleton) of canonical points `points` in `pose`, from `.skf` bytes.
-    pub fn weights_for_skf(bytes: &[u8], points: &[Vec3], pose: &Pose) -> Result<Vec<f32>, RuntimeError> {
+    pub fn weights_for_skf(
+        bytes: &[u8],
+        points: &[Vec3],
+        pose: &Pose,
+    ) -> Result<Vec<f32>, RuntimeError> {
         let model = Self::from_skf(bytes)?;
         let mut out = vec![0.0; points.len() * model.joint_count()];
         model.weights_for(points, pose, &mut out)?;
@@ -214,13 +270,24 @@ impl<'w> SkinNet<&'w [f32]> {
         let config = *view.config();
         let layout = Layout::new(&config);
         if buf.len() < layout.total {
-            return Err(RuntimeError::BufferLength { field: "buf", len: buf.len(), expected: layout.total });
+            return Err(RuntimeError::BufferLength {
+                field: "buf",
+                len: buf.len(),
+                expected: layout.total,
+            });
         }
         let buf = &mut buf[..layout.total];
         expand(view, &layout, buf)?;
         let skeleton = view.skeleton().to_skeleton()?;
         let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
-        Ok(SkinNet { weights: buf, layout, config, skeleton, kernel: Kernel::detect(), id })
+        Ok(SkinNet {
+            weights: buf,
+            layout,
+            config,
+            skeleton,
+            kernel: Kernel::detect(),
+            id,
+        })
     }
 }
 
@@ -319,7 +386,13 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
 
     /// The MLP over one tile: `pre` is the tile's bound block, `fb` the frame bias; `a` and `b`
     /// are scratch (`max_rows_p × TILE` each). Returns the softmaxed weights, `[J][TILE]`.
-    pub(crate) fn forward_tile<'s>(&self, pre: &[f32], fb: &[f32], a: &'s mut [f32], b: &'s mut [f32]) -> &'s [f32] {
+    pub(crate) fn forward_tile<'s>(
+        &self,
+        pre: &[f32],
+        fb: &[f32],
+        a: &'s mut [f32],
+        b: &'s mut [f32],
+    ) -> &'s [f32] {
         let w = self.weights();
         let beta = self.config.softplus_beta;
         let n = self.layout.count;
@@ -332,10 +405,16 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
                     k: l.k_h,
                     input: src,
                     bias: &fb[l.fb_off..l.fb_off + l.rows_p],
-                    pre: l.pos_off.map(|_| &pre[l.pre_off * TILE..(l.pre_off + l.rows_p) * TILE]),
+                    pre: l
+                        .pos_off
+                        .map(|_| &pre[l.pre_off * TILE..(l.pre_off + l.rows_p) * TILE]),
                     out: dst,
                     rows_p: l.rows_p,
-                    act: if i + 1 < n { Act::Softplus { beta } } else { Act::Identity },
+                    act: if i + 1 < n {
+                        Act::Softplus { beta }
+                    } else {
+                        Act::Identity
+                    },
                 },
             );
             core::mem::swap(&mut src, &mut dst);
@@ -347,10 +426,22 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
     /// The SkinNet weights of canonical points `points` in `pose` into `out`
     /// (`points.len() × J`, row-major). Allocates (it binds the points); for repeated frames use
     /// [`crate::BoundMesh`], [`crate::FrameState`] and [`crate::WeightsJob`].
-    pub fn weights_for(&self, points: &[Vec3], pose: &Pose, out: &mut [f32]) -> Result<(), RuntimeError> {
-        let expected = points.len().checked_mul(self.joint_count()).ok_or(RuntimeError::VertexCount(points.len()))?;
+    pub fn weights_for(
+        &self,
+        points: &[Vec3],
+        pose: &Pose,
+        out: &mut [f32],
+    ) -> Result<(), RuntimeError> {
+        let expected = points
+            .len()
+            .checked_mul(self.joint_count())
+            .ok_or(RuntimeError::VertexCount(points.len()))?;
         if out.len() != expected {
-            return Err(RuntimeError::BufferLength { field: "out", len: out.len(), expected });
+            return Err(RuntimeError::BufferLength {
+                field: "out",
+                len: out.len(),
+                expected,
+            });
         }
         if points.is_empty() {
             return Ok(());
@@ -359,6 +450,13 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
         let mut frame = crate::FrameState::new(self);
         frame.set_pose(self, pose)?;
         let mut scratch = crate::Scratch::new(self);
-        crate::WeightsJob { model: self, mesh: &mesh, frame: &frame, first_vertex: 0, out_weights: out }.run(&mut scratch)
+        crate::WeightsJob {
+            model: self,
+            mesh: &mesh,
+            frame: &frame,
+            first_vertex: 0,
+            out_weights: out,
+        }
+        .run(&mut scratch)
     }
 }

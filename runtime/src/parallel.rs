@@ -7,15 +7,25 @@ use crate::kernels::TILE;
 
 /// Runs `job` on the current rayon pool with one chunk per entry of `scratches` (give as many
 /// as threads). Validates first, so a bad job is refused before any thread starts.
-pub fn run_parallel<W: AsRef<[f32]> + Sync>(job: SkinJob<'_, W>, scratches: &mut [Scratch]) -> Result<(), RuntimeError> {
+pub fn run_parallel<W: AsRef<[f32]> + Sync>(
+    job: SkinJob<'_, W>,
+    scratches: &mut [Scratch],
+) -> Result<(), RuntimeError> {
     job.validate()?;
     if scratches.is_empty() {
-        return Err(RuntimeError::BufferLength { field: "scratches", len: 0, expected: 1 });
+        return Err(RuntimeError::BufferLength {
+            field: "scratches",
+            len: 0,
+            expected: 1,
+        });
     }
     go(job, scratches)
 }
 
-fn go<W: AsRef<[f32]> + Sync>(mut job: SkinJob<'_, W>, scratches: &mut [Scratch]) -> Result<(), RuntimeError> {
+fn go<W: AsRef<[f32]> + Sync>(
+    mut job: SkinJob<'_, W>,
+    scratches: &mut [Scratch],
+) -> Result<(), RuntimeError> {
     let count = job.out_positions.len();
     if scratches.len() == 1 || count <= TILE {
         return job.run(&mut scratches[0]);
@@ -24,8 +34,11 @@ fn go<W: AsRef<[f32]> + Sync>(mut job: SkinJob<'_, W>, scratches: &mut [Scratch]
     // Split proportionally to the scratches on each side, at a tile boundary of the mesh so no
     // tile's MLP is evaluated twice.
     let target = job.first_vertex + count * s0.len() / (s0.len() + s1.len());
-    let at = (target.div_ceil(TILE) * TILE).clamp(job.first_vertex, job.first_vertex + count) - job.first_vertex;
-    let (head, tail) = job.split_at(at).ok_or(RuntimeError::Mismatch { field: "job outputs" })?;
+    let at = (target.div_ceil(TILE) * TILE).clamp(job.first_vertex, job.first_vertex + count)
+        - job.first_vertex;
+    let (head, tail) = job.split_at(at).ok_or(RuntimeError::Mismatch {
+        field: "job outputs",
+    })?;
     let (a, b) = rayon::join(|| go(head, s0), || go(tail, s1));
     a.and(b)
 }

@@ -25,7 +25,10 @@ pub struct DualQuat {
 
 impl DualQuat {
     /// The identity.
-    pub const IDENTITY: Self = Self { real: Quat::IDENTITY, dual: Quat::from_xyzw(0.0, 0.0, 0.0, 0.0) };
+    pub const IDENTITY: Self = Self {
+        real: Quat::IDENTITY,
+        dual: Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+    };
 
     /// The rigid part of an affine matrix (scale and shear dropped).
     #[must_use]
@@ -33,7 +36,10 @@ impl DualQuat {
         let (_, r, t) = m.to_scale_rotation_translation();
         let r = r.normalize();
         let r = if r.is_finite() { r } else { Quat::IDENTITY };
-        Self { real: r, dual: Quat::from_xyzw(t.x, t.y, t.z, 0.0) * r * 0.5 }
+        Self {
+            real: r,
+            dual: Quat::from_xyzw(t.x, t.y, t.z, 0.0) * r * 0.5,
+        }
     }
 
     /// Translation `2 · dual · real*`.
@@ -47,7 +53,11 @@ impl DualQuat {
 /// Cofactor matrix of `m`'s upper 3×3: `det(m) · m⁻ᵀ`, the normal transform that stays defined
 /// for singular blends and keeps orientation under mirroring.
 fn cofactor(m: &Mat4) -> Mat3 {
-    let (c0, c1, c2) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
+    let (c0, c1, c2) = (
+        m.x_axis.truncate(),
+        m.y_axis.truncate(),
+        m.z_axis.truncate(),
+    );
     Mat3::from_cols(c1.cross(c2), c2.cross(c0), c0.cross(c1))
 }
 
@@ -60,7 +70,13 @@ pub(crate) struct Skinned {
 }
 
 /// LBS of one vertex with influences `(joint, weight)`.
-pub(crate) fn lbs(mats: &[Mat4], infl: impl Iterator<Item = (usize, f32)>, p: Vec3, n: Vec3, t: Vec4) -> Skinned {
+pub(crate) fn lbs(
+    mats: &[Mat4],
+    infl: impl Iterator<Item = (usize, f32)>,
+    p: Vec3,
+    n: Vec3,
+    t: Vec4,
+) -> Skinned {
     let mut m = Mat4::ZERO;
     for (j, w) in infl {
         if let Some(mj) = mats.get(j) {
@@ -112,7 +128,10 @@ pub(crate) fn dqs(
     if !(len > 1e-8) {
         return lbs(mats, infl, p, n, t);
     }
-    let b = DualQuat { real: Quat::from_vec4(real / len), dual: Quat::from_vec4(dual / len) };
+    let b = DualQuat {
+        real: Quat::from_vec4(real / len),
+        dual: Quat::from_vec4(dual / len),
+    };
     // For a non-unit blend, the translation of the normalised dual quaternion must use the part
     // of `dual` orthogonal to `real` (Kavan 2007, eq. 5); `translation()` does this implicitly
     // through `dual · real*`, whose scalar part we discard.
@@ -131,7 +150,8 @@ mod tests {
 
     #[test]
     fn dual_quat_round_trips_a_rigid_matrix() {
-        let m = Mat4::from_rotation_translation(Quat::from_rotation_y(0.7), Vec3::new(1.0, -2.0, 0.5));
+        let m =
+            Mat4::from_rotation_translation(Quat::from_rotation_y(0.7), Vec3::new(1.0, -2.0, 0.5));
         let d = DualQuat::from_mat4(&m);
         let p = Vec3::new(0.3, 0.4, -0.2);
         assert!((d.real * p + d.translation() - m.transform_point3(p)).length() < 1e-6);
@@ -149,11 +169,20 @@ mod tests {
         let n = Vec3::X;
         let t = Vec4::new(0.0, 1.0, 0.0, -1.0);
         let infl = [(1usize, 1.0f32)];
-        for s in [lbs(&mats, infl.iter().copied(), p, n, t), dqs(&mats, &dq, infl.iter().copied(), p, n, t)] {
+        for s in [
+            lbs(&mats, infl.iter().copied(), p, n, t),
+            dqs(&mats, &dq, infl.iter().copied(), p, n, t),
+        ] {
             // (0, 2, 0) is 1 above the pivot; +90° about Z sends +Y to −X.
-            assert!((s.position - Vec3::new(-1.0, 1.0, 0.0)).length() < 1e-6, "{s:?}");
+            assert!(
+                (s.position - Vec3::new(-1.0, 1.0, 0.0)).length() < 1e-6,
+                "{s:?}"
+            );
             assert!((s.normal - Vec3::Y).length() < 1e-6, "{s:?}");
-            assert!((s.tangent - Vec4::new(-1.0, 0.0, 0.0, -1.0)).length() < 1e-6, "{s:?}");
+            assert!(
+                (s.tangent - Vec4::new(-1.0, 0.0, 0.0, -1.0)).length() < 1e-6,
+                "{s:?}"
+            );
         }
     }
 
@@ -176,7 +205,10 @@ mod tests {
             // bisectors are equally valid, so only |z| is fixed).
             assert!((radius(d) - 1.0).abs() < 1e-6, "dqs {d}");
             let want = Vec3::new(0.5, (angle / 2.0).cos(), (angle / 2.0).sin());
-            assert!((Vec3::new(d.x, d.y, d.z.abs()) - want).length() < 1e-6, "dqs {d}");
+            assert!(
+                (Vec3::new(d.x, d.y, d.z.abs()) - want).length() < 1e-6,
+                "dqs {d}"
+            );
         }
     }
 
@@ -196,7 +228,14 @@ mod tests {
         let mut dq = [DualQuat::IDENTITY; 2];
         dq[1].real = -dq[1].real;
         // Weights of opposite sign (only reachable through a hand-made skin) must not give NaN.
-        let s = dqs(&mats, &dq, [(0usize, 1.0f32), (1, -1.0)].into_iter(), Vec3::ONE, Vec3::Y, Vec4::X);
+        let s = dqs(
+            &mats,
+            &dq,
+            [(0usize, 1.0f32), (1, -1.0)].into_iter(),
+            Vec3::ONE,
+            Vec3::Y,
+            Vec4::X,
+        );
         assert!(s.position.is_finite());
     }
 }

@@ -38,7 +38,11 @@ impl StaticSkinJob<'_> {
     pub fn validate(&self) -> Result<(), RuntimeError> {
         let n = self.rest_positions.len();
         if self.skin.vertex_count() != n {
-            return Err(RuntimeError::BufferLength { field: "rest_positions", len: n, expected: self.skin.vertex_count() });
+            return Err(RuntimeError::BufferLength {
+                field: "rest_positions",
+                len: n,
+                expected: self.skin.vertex_count(),
+            });
         }
         if self.palette.joint_count() < self.skin.joint_count() {
             return Err(RuntimeError::BufferLength {
@@ -51,11 +55,31 @@ impl StaticSkinJob<'_> {
             return Err(RuntimeError::NoPose);
         }
         let count = self.out_positions.len();
-        if self.first_vertex.checked_add(count).is_none_or(|end| end > n) {
-            return Err(RuntimeError::Range { first: self.first_vertex, count, vertex_count: n });
+        if self
+            .first_vertex
+            .checked_add(count)
+            .is_none_or(|end| end > n)
+        {
+            return Err(RuntimeError::Range {
+                first: self.first_vertex,
+                count,
+                vertex_count: n,
+            });
         }
-        check_attr(self.rest_normals, self.out_normals.as_deref(), ("rest_normals", "out_normals"), n, count)?;
-        check_attr(self.rest_tangents, self.out_tangents.as_deref(), ("rest_tangents", "out_tangents"), n, count)?;
+        check_attr(
+            self.rest_normals,
+            self.out_normals.as_deref(),
+            ("rest_normals", "out_normals"),
+            n,
+            count,
+        )?;
+        check_attr(
+            self.rest_tangents,
+            self.out_tangents.as_deref(),
+            ("rest_tangents", "out_tangents"),
+            n,
+            count,
+        )?;
         Ok(())
     }
 

@@ -17,7 +17,10 @@ const W: usize = 8;
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn exp_ps(z: __m256) -> __m256 {
-    let z = _mm256_min_ps(_mm256_max_ps(z, _mm256_set1_ps(EXP_MIN)), _mm256_set1_ps(EXP_MAX));
+    let z = _mm256_min_ps(
+        _mm256_max_ps(z, _mm256_set1_ps(EXP_MIN)),
+        _mm256_set1_ps(EXP_MAX),
+    );
     let t = _mm256_fmadd_ps(z, _mm256_set1_ps(LOG2E), _mm256_set1_ps(0.5));
     let n = _mm256_floor_ps(t);
     let r = _mm256_fnmadd_ps(n, _mm256_set1_ps(LN2_HI), z);
@@ -26,8 +29,14 @@ fn exp_ps(z: __m256) -> __m256 {
     for &c in &EXP_P[1..] {
         p = _mm256_fmadd_ps(p, r, _mm256_set1_ps(c));
     }
-    let y = _mm256_add_ps(_mm256_fmadd_ps(p, _mm256_mul_ps(r, r), r), _mm256_set1_ps(1.0));
-    let e = _mm256_slli_epi32::<23>(_mm256_add_epi32(_mm256_cvtps_epi32(n), _mm256_set1_epi32(127)));
+    let y = _mm256_add_ps(
+        _mm256_fmadd_ps(p, _mm256_mul_ps(r, r), r),
+        _mm256_set1_ps(1.0),
+    );
+    let e = _mm256_slli_epi32::<23>(_mm256_add_epi32(
+        _mm256_cvtps_epi32(n),
+        _mm256_set1_epi32(127),
+    ));
     _mm256_mul_ps(y, _mm256_castsi256_ps(e))
 }
 
@@ -46,7 +55,10 @@ fn log1p_ps(y: __m256) -> __m256 {
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn softplus_ps(x: __m256, beta: __m256, inv_beta: __m256) -> __m256 {
-    let e = exp_ps(_mm256_sub_ps(_mm256_setzero_ps(), _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x))));
+    let e = exp_ps(_mm256_sub_ps(
+        _mm256_setzero_ps(),
+        _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x)),
+    ));
     _mm256_fmadd_ps(log1p_ps(e), inv_beta, _mm256_max_ps(x, _mm256_setzero_ps()))
 }
 
@@ -54,7 +66,16 @@ fn softplus_ps(x: __m256, beta: __m256, inv_beta: __m256) -> __m256 {
 /// The CPU must support AVX2 and FMA, and `a.assert_shapes()` must have passed.
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn layer(a: LayerArgs<'_>) {
-    let LayerArgs { panels, k, input, bias, pre, out, rows_p, act } = a;
+    let LayerArgs {
+        panels,
+        k,
+        input,
+        bias,
+        pre,
+        out,
+        rows_p,
+        act,
+    } = a;
     let (beta, inv_beta, softplus) = match act {
         Act::Softplus { beta } => (beta, 1.0 / beta, true),
         Act::Identity => (1.0, 1.0, false),

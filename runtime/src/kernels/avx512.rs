@@ -12,7 +12,10 @@ const NV: usize = TILE / 16;
 #[inline]
 #[target_feature(enable = "avx512f")]
 fn exp_ps(z: __m512) -> __m512 {
-    let z = _mm512_min_ps(_mm512_max_ps(z, _mm512_set1_ps(EXP_MIN)), _mm512_set1_ps(EXP_MAX));
+    let z = _mm512_min_ps(
+        _mm512_max_ps(z, _mm512_set1_ps(EXP_MIN)),
+        _mm512_set1_ps(EXP_MAX),
+    );
     let t = _mm512_fmadd_ps(z, _mm512_set1_ps(LOG2E), _mm512_set1_ps(0.5));
     let n = _mm512_roundscale_ps::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(t);
     let r = _mm512_fnmadd_ps(n, _mm512_set1_ps(LN2_HI), z);
@@ -21,8 +24,14 @@ fn exp_ps(z: __m512) -> __m512 {
     for &c in &EXP_P[1..] {
         p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(c));
     }
-    let y = _mm512_add_ps(_mm512_fmadd_ps(p, _mm512_mul_ps(r, r), r), _mm512_set1_ps(1.0));
-    let e = _mm512_slli_epi32::<23>(_mm512_add_epi32(_mm512_cvtps_epi32(n), _mm512_set1_epi32(127)));
+    let y = _mm512_add_ps(
+        _mm512_fmadd_ps(p, _mm512_mul_ps(r, r), r),
+        _mm512_set1_ps(1.0),
+    );
+    let e = _mm512_slli_epi32::<23>(_mm512_add_epi32(
+        _mm512_cvtps_epi32(n),
+        _mm512_set1_epi32(127),
+    ));
     _mm512_mul_ps(y, _mm512_castsi512_ps(e))
 }
 
@@ -41,7 +50,10 @@ fn log1p_ps(y: __m512) -> __m512 {
 #[inline]
 #[target_feature(enable = "avx512f")]
 fn softplus_ps(x: __m512, beta: __m512, inv_beta: __m512) -> __m512 {
-    let e = exp_ps(_mm512_sub_ps(_mm512_setzero_ps(), _mm512_mul_ps(beta, _mm512_abs_ps(x))));
+    let e = exp_ps(_mm512_sub_ps(
+        _mm512_setzero_ps(),
+        _mm512_mul_ps(beta, _mm512_abs_ps(x)),
+    ));
     _mm512_fmadd_ps(log1p_ps(e), inv_beta, _mm512_max_ps(x, _mm512_setzero_ps()))
 }
 
@@ -49,7 +61,16 @@ fn softplus_ps(x: __m512, beta: __m512, inv_beta: __m512) -> __m512 {
 /// The CPU must support AVX-512F, and `a.assert_shapes()` must have passed.
 #[target_feature(enable = "avx512f")]
 pub(super) unsafe fn layer(a: LayerArgs<'_>) {
-    let LayerArgs { panels, k, input, bias, pre, out, rows_p, act } = a;
+    let LayerArgs {
+        panels,
+        k,
+        input,
+        bias,
+        pre,
+        out,
+        rows_p,
+        act,
+    } = a;
     let (beta, inv_beta, softplus) = match act {
         Act::Softplus { beta } => (beta, 1.0 / beta, true),
         Act::Identity => (1.0, 1.0, false),
@@ -86,7 +107,9 @@ pub(super) unsafe fn layer(a: LayerArgs<'_>) {
                 let mut v = _mm512_add_ps(acc_rc, b);
                 if let Some(pre) = pre {
                     // SAFETY: `o < rows_p` and `pre.len() ≥ rows_p·TILE`.
-                    v = _mm512_add_ps(v, unsafe { _mm512_loadu_ps(pre.as_ptr().add(o * TILE + 16 * c)) });
+                    v = _mm512_add_ps(v, unsafe {
+                        _mm512_loadu_ps(pre.as_ptr().add(o * TILE + 16 * c))
+                    });
                 }
                 if softplus {
                     v = softplus_ps(v, beta, inv_beta);

@@ -12,11 +12,11 @@
 
 use crate::activation::Act;
 
-mod scalar;
 #[cfg(target_arch = "x86_64")]
 mod avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod scalar;
 
 /// Vertices per tile (the GEMM's N dimension).
 pub const TILE: usize = 32;
@@ -55,7 +55,11 @@ impl Kernel {
     /// The fastest available kernel.
     #[must_use]
     pub fn detect() -> Kernel {
-        *Self::ALL.iter().rev().find(|k| k.is_available()).unwrap_or(&Kernel::Scalar)
+        *Self::ALL
+            .iter()
+            .rev()
+            .find(|k| k.is_available())
+            .unwrap_or(&Kernel::Scalar)
     }
 }
 
@@ -115,7 +119,10 @@ impl LayerArgs<'_> {
             && self.bias.len() >= self.rows_p
             && self.pre.is_none_or(|p| p.len() >= self.rows_p * TILE)
             && self.out.len() >= self.rows_p * TILE;
-        assert!(ok, "kernel layer arguments out of shape (internal invariant)");
+        assert!(
+            ok,
+            "kernel layer arguments out of shape (internal invariant)"
+        );
     }
 }
 
@@ -141,7 +148,10 @@ pub(crate) fn layer(kernel: Kernel, args: LayerArgs<'_>) {
 
 /// Softmax over the first `rows` rows of a `[row][TILE]` buffer, per vertex column.
 pub(crate) fn softmax_tile(kernel: Kernel, buf: &mut [f32], rows: usize) {
-    assert!(rows >= 1 && buf.len() >= rows * TILE, "softmax tile out of shape (internal invariant)");
+    assert!(
+        rows >= 1 && buf.len() >= rows * TILE,
+        "softmax tile out of shape (internal invariant)"
+    );
     match kernel {
         #[cfg(target_arch = "x86_64")]
         Kernel::Avx512 if !cfg!(feature = "scalar") => {
@@ -159,11 +169,20 @@ pub(crate) fn softmax_tile(kernel: Kernel, buf: &mut [f32], rows: usize) {
 
 /// Packs a `rows × k` matrix given by `get(row, col)` into `MR`-row panels (`out` holds
 /// `round_up(rows, MR) × k` floats), padding rows with zeros; stops at the first error of `get`.
-pub(crate) fn pack_panels<E>(rows: usize, k: usize, out: &mut [f32], mut get: impl FnMut(usize, usize) -> Result<f32, E>) -> Result<(), E> {
+pub(crate) fn pack_panels<E>(
+    rows: usize,
+    k: usize,
+    out: &mut [f32],
+    mut get: impl FnMut(usize, usize) -> Result<f32, E>,
+) -> Result<(), E> {
     if k == 0 {
         return Ok(());
     }
-    for (p, panel) in out.chunks_exact_mut(k * MR).enumerate().take(rows.div_ceil(MR)) {
+    for (p, panel) in out
+        .chunks_exact_mut(k * MR)
+        .enumerate()
+        .take(rows.div_ceil(MR))
+    {
         for (kk, w) in panel.chunks_exact_mut(MR).enumerate() {
             for (r, slot) in w.iter_mut().enumerate() {
                 let o = p * MR + r;

@@ -5,7 +5,16 @@ use super::{LayerArgs, MR, TILE};
 use crate::activation::{Act, softplus};
 
 pub(super) fn layer(a: LayerArgs<'_>) {
-    let LayerArgs { panels, k, input, bias, pre, out, rows_p, act } = a;
+    let LayerArgs {
+        panels,
+        k,
+        input,
+        bias,
+        pre,
+        out,
+        rows_p,
+        act,
+    } = a;
     for p in 0..rows_p / MR {
         let mut acc = [[0.0f32; TILE]; MR];
         let panel = &panels[p * k * MR..(p + 1) * k * MR];

@@ -10,13 +10,36 @@ use super::*;
 use crate::activation::{Act, softplus};
 
 fn random(rng: &mut ChaCha8Rng, n: usize, scale: f32) -> Vec<f32> {
-    (0..n).map(|_| rng.random_range(-1.0..1.0) * scale).collect()
+    (0..n)
+        .map(|_| rng.random_range(-1.0..1.0) * scale)
+        .collect()
 }
 
 /// Runs one layer with `kernel`; returns the output.
-fn run(kernel: Kernel, panels: &[f32], k: usize, input: &[f32], bias: &[f32], pre: Option<&[f32]>, rows_p: usize, act: Act) -> Vec<f32> {
+fn run(
+    kernel: Kernel,
+    panels: &[f32],
+    k: usize,
+    input: &[f32],
+    bias: &[f32],
+    pre: Option<&[f32]>,
+    rows_p: usize,
+    act: Act,
+) -> Vec<f32> {
     let mut out = vec![f32::NAN; rows_p * TILE];
-    layer(kernel, LayerArgs { panels, k, input, bias, pre, out: &mut out, rows_p, act });
+    layer(
+        kernel,
+        LayerArgs {
+            panels,
+            k,
+            input,
+            bias,
+            pre,
+            out: &mut out,
+            rows_p,
+            act,
+        },
+    );
     out
 }
 
@@ -26,7 +49,10 @@ fn assert_close(a: &[f32], b: &[f32], what: &str) {
     let rms = (b.iter().map(|v| f64::from(*v).powi(2)).sum::<f64>() / b.len() as f64).sqrt();
     for (i, (x, y)) in a.iter().zip(b).enumerate() {
         let tol = 1e-5 * f64::from(y.abs()).max(rms);
-        assert!((f64::from(*x) - f64::from(*y)).abs() <= tol, "{what}: element {i}: {x} vs {y} (tol {tol})");
+        assert!(
+            (f64::from(*x) - f64::from(*y)).abs() <= tol,
+            "{what}: element {i}: {x} vs {y} (tol {tol})"
+        );
     }
 }
 
@@ -39,12 +65,27 @@ fn scalar_layer_matches_a_naive_product() {
     let bias = random(&mut rng, 24, 0.1);
     let mut panels = vec![0.0; 24 * k];
     pack_panels::<()>(rows, k, &mut panels, |o, c| Ok(w[o * k + c])).unwrap();
-    let out = run(Kernel::Scalar, &panels, k, &x, &bias, None, 24, Act::Softplus { beta: 3.0 });
+    let out = run(
+        Kernel::Scalar,
+        &panels,
+        k,
+        &x,
+        &bias,
+        None,
+        24,
+        Act::Softplus { beta: 3.0 },
+    );
     for o in 0..rows {
         for v in 0..TILE {
-            let s: f64 = (0..k).map(|c| f64::from(w[o * k + c]) * f64::from(x[c * TILE + v])).sum::<f64>() + f64::from(bias[o]);
+            let s: f64 = (0..k)
+                .map(|c| f64::from(w[o * k + c]) * f64::from(x[c * TILE + v]))
+                .sum::<f64>()
+                + f64::from(bias[o]);
             let want = softplus(s as f32, 3.0);
-            assert!((out[o * TILE + v] - want).abs() <= 1e-5 * want.abs().max(1.0), "{o} {v}");
+            assert!(
+                (out[o * TILE + v] - want).abs() <= 1e-5 * want.abs().max(1.0),
+                "{o} {v}"
+            );
         }
     }
 }
@@ -54,8 +95,21 @@ fn every_kernel_agrees_with_scalar_on_real_shapes() {
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     // (rows, k, with per-vertex part): the VINECS layers for J = 24 (hidden parts), the
     // bind-time position parts (k = 39) and a layer with no GEMM (layer 0 per frame).
-    let shapes: [(usize, usize, bool); 8] = [(256, 256, false), (128, 256, true), (256, 128, false), (24, 256, false), (256, 39, false), (128, 39, false), (256, 0, true), (5, 7, true)];
-    let kernels: Vec<Kernel> = Kernel::ALL.iter().copied().filter(|k| k.is_available() && *k != Kernel::Scalar).collect();
+    let shapes: [(usize, usize, bool); 8] = [
+        (256, 256, false),
+        (128, 256, true),
+        (256, 128, false),
+        (24, 256, false),
+        (256, 39, false),
+        (128, 39, false),
+        (256, 0, true),
+        (5, 7, true),
+    ];
+    let kernels: Vec<Kernel> = Kernel::ALL
+        .iter()
+        .copied()
+        .filter(|k| k.is_available() && *k != Kernel::Scalar)
+        .collect();
     for (rows, k, with_pre) in shapes {
         let rows_p = rows.div_ceil(MR) * MR;
         let w = random(&mut rng, rows * k, (3.0 / k.max(1) as f32).sqrt());
@@ -65,7 +119,11 @@ fn every_kernel_agrees_with_scalar_on_real_shapes() {
         let bias = random(&mut rng, rows_p, 0.5);
         let pre = random(&mut rng, rows_p * TILE, 0.5);
         let pre = with_pre.then_some(&pre[..]);
-        for act in [Act::Softplus { beta: 100.0 }, Act::Softplus { beta: 1.0 }, Act::Identity] {
+        for act in [
+            Act::Softplus { beta: 100.0 },
+            Act::Softplus { beta: 1.0 },
+            Act::Identity,
+        ] {
             let want = run(Kernel::Scalar, &panels, k, &x, &bias, pre, rows_p, act);
             for &kern in &kernels {
                 let got = run(kern, &panels, k, &x, &bias, pre, rows_p, act);
@@ -78,18 +136,36 @@ fn every_kernel_agrees_with_scalar_on_real_shapes() {
 #[test]
 fn simd_softplus_is_accurate_across_the_range() {
     // A K = 0 layer is pure bias + pre + activation: sweep the activation's argument.
-    let kernels: Vec<Kernel> = Kernel::ALL.iter().copied().filter(|k| k.is_available()).collect();
+    let kernels: Vec<Kernel> = Kernel::ALL
+        .iter()
+        .copied()
+        .filter(|k| k.is_available())
+        .collect();
     let rows_p = 64;
-    let pre: Vec<f32> = (0..rows_p * TILE).map(|i| -1.0 + 2.0 * i as f32 / (rows_p * TILE) as f32).collect();
+    let pre: Vec<f32> = (0..rows_p * TILE)
+        .map(|i| -1.0 + 2.0 * i as f32 / (rows_p * TILE) as f32)
+        .collect();
     let bias = vec![0.0; rows_p];
     for beta in [100.0f32, 1.0, 7.5] {
         for &kern in &kernels {
-            let got = run(kern, &[], 0, &[], &bias, Some(&pre), rows_p, Act::Softplus { beta });
+            let got = run(
+                kern,
+                &[],
+                0,
+                &[],
+                &bias,
+                Some(&pre),
+                rows_p,
+                Act::Softplus { beta },
+            );
             for (g, x) in got.iter().zip(&pre) {
                 let bx = f64::from(beta) * f64::from(*x);
                 let want = (bx.max(0.0) + libm::log1p(libm::exp(-bx.abs()))) / f64::from(beta);
                 let err = (f64::from(*g) - want).abs();
-                assert!(err <= 1e-6 * want.abs() + 1e-30, "{kern:?} β={beta} x={x}: {g} vs {want}");
+                assert!(
+                    err <= 1e-6 * want.abs() + 1e-30,
+                    "{kern:?} β={beta} x={x}: {g} vs {want}"
+                );
             }
         }
     }
@@ -111,7 +187,10 @@ fn every_kernel_softmax_agrees_with_scalar() {
             let mut got = logits.clone();
             softmax_tile(kern, &mut got, rows);
             for (g, w) in got.iter().zip(&want) {
-                assert!((g - w).abs() <= 1e-5 * w.max(1e-3), "{kern:?} rows {rows}: {g} vs {w}");
+                assert!(
+                    (g - w).abs() <= 1e-5 * w.max(1e-3),
+                    "{kern:?} rows {rows}: {g} vs {w}"
+                );
             }
         }
     }
