@@ -26,7 +26,7 @@ pub const EXP_P: [f32; 6] = [
     8.333_452e-3,
     4.166_579_6e-2,
     1.666_666_5e-1,
-    5.000_000_1e-1,
+    0.5,
 ];
 /// `atanh` series `Σ z^k / (2k+1)`, highest degree first, for `log1p(y) = 2s·Q(s²)` with
 /// `s = y / (2 + y) ∈ [0, 1/3]` (truncation error below 1.5e-8 relative).

@@ -87,14 +87,14 @@ pub(crate) fn check_attr<A, B>(
     vertices: usize,
     count: usize,
 ) -> Result<(), RuntimeError> {
-    if let Some(r) = rest {
-        if r.len() != vertices {
-            return Err(RuntimeError::BufferLength {
-                field: names.0,
-                len: r.len(),
-                expected: vertices,
-            });
-        }
+    if let Some(r) = rest
+        && r.len() != vertices
+    {
+        return Err(RuntimeError::BufferLength {
+            field: names.0,
+            len: r.len(),
+            expected: vertices,
+        });
     }
     if let Some(o) = out {
         if rest.is_none() {
@@ -301,7 +301,7 @@ impl<W: AsRef<[f32]>> WeightsJob<'_, W> {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), RuntimeError> {
         let j = self.model.joint_count();
-        if self.out_weights.len() % j != 0 {
+        if !self.out_weights.len().is_multiple_of(j) {
             let expected = self.out_weights.len() / j * j;
             return Err(RuntimeError::BufferLength {
                 field: "out_weights",

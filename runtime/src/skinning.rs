@@ -109,11 +109,11 @@ pub(crate) fn dqs(
     let mut pivot = Quat::IDENTITY;
     let mut best = f32::NEG_INFINITY;
     for (j, w) in infl.clone() {
-        if let Some(d) = dqs.get(j) {
-            if w > best {
-                best = w;
-                pivot = d.real;
-            }
+        if let Some(d) = dqs.get(j)
+            && w > best
+        {
+            best = w;
+            pivot = d.real;
         }
     }
     let (mut real, mut dual) = (Vec4::ZERO, Vec4::ZERO);
@@ -125,7 +125,7 @@ pub(crate) fn dqs(
         }
     }
     let len = real.length();
-    if !(len > 1e-8) {
+    if len.is_nan() || len <= 1e-8 {
         return lbs(mats, infl, p, n, t);
     }
     let b = DualQuat {

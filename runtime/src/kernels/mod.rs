@@ -113,7 +113,7 @@ impl LayerArgs<'_> {
     /// The slice lengths are an internal invariant (sizes come from one layout); checking them
     /// once here is what makes the raw-pointer loops of the SIMD kernels in bounds.
     fn assert_shapes(&self) {
-        let ok = self.rows_p % MR == 0
+        let ok = self.rows_p.is_multiple_of(MR)
             && self.panels.len() >= self.rows_p * self.k
             && self.input.len() >= self.k * TILE
             && self.bias.len() >= self.rows_p

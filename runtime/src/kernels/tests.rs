@@ -16,6 +16,7 @@ fn random(rng: &mut ChaCha8Rng, n: usize, scale: f32) -> Vec<f32> {
 }
 
 /// Runs one layer with `kernel`; returns the output.
+#[allow(clippy::too_many_arguments)]
 fn run(
     kernel: Kernel,
     panels: &[f32],

@@ -138,7 +138,7 @@ pub fn random_frames(n: usize, rng: &mut ChaCha8Rng) -> (Vec<Vec3>, Vec<glam::Ve
     };
     let normals: Vec<Vec3> = (0..n).map(|_| unit()).collect();
     let tangents = (0..n)
-        .map(|_| unit().extend(if n % 2 == 0 { 1.0 } else { -1.0 }))
+        .map(|i| unit().extend(if i.is_multiple_of(2) { 1.0 } else { -1.0 }))
         .collect();
     (normals, tangents)
 }
