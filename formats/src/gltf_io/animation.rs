@@ -227,6 +227,33 @@ pub(crate) fn read_clip(src: &Source<'_>, anim: &gltf::Animation<'_>) -> Result<
     let mut keys = 0usize;
     for ch in anim.channels() {
         let field = format!("animations[{ai}].channels[{}]", ch.index());
+        {
+            use gltf::accessor::{DataType as D, Dimensions as M};
+            use gltf::animation::Property as P;
+            let (input, output) = (ch.sampler().input(), ch.sampler().output());
+            src.expect(
+                &input,
+                &[M::Scalar],
+                &[D::F32],
+                &format!("{field}.sampler.input"),
+            )?;
+            let of = format!("{field}.sampler.output");
+            match ch.target().property() {
+                P::Translation | P::Scale => src.expect(&output, &[M::Vec3], &[D::F32], &of)?,
+                P::Rotation => src.expect(
+                    &output,
+                    &[M::Vec4],
+                    &[D::F32, D::I8, D::U8, D::I16, D::U16],
+                    &of,
+                )?,
+                P::MorphTargetWeights => src.expect(
+                    &output,
+                    &[M::Scalar],
+                    &[D::F32, D::I8, D::U8, D::I16, D::U16],
+                    &of,
+                )?,
+            }
+        }
         let reader = ch.reader(src.data());
         let times: Vec<f32> = reader
             .read_inputs()

@@ -6,6 +6,7 @@ use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
 
 use glam::{DMat4, Mat4, Vec2, Vec3};
+use gltf::accessor::{DataType, Dimensions};
 
 use super::animation::read_clip;
 use super::container::{check_accessors, check_container, load_buffers, read_capped};
@@ -84,6 +85,29 @@ impl<'a> Source<'a> {
         move |b| buffers.get(b.index()).map(Vec::as_slice)
     }
 
+    /// Checks an accessor's element type before a gltf reader trusts it (the readers pick the
+    /// element size from the component type alone and assume the dimensions).
+    pub fn expect(
+        &self,
+        acc: &gltf::Accessor<'_>,
+        dims: &[Dimensions],
+        types: &[DataType],
+        field: &str,
+    ) -> Result<(), GltfError> {
+        if dims.contains(&acc.dimensions()) && types.contains(&acc.data_type()) {
+            Ok(())
+        } else {
+            Err(self.field(
+                format!("{field} (accessors[{}])", acc.index()),
+                format!(
+                    "{:?} of {:?} is not a valid type here",
+                    acc.dimensions(),
+                    acc.data_type()
+                ),
+            ))
+        }
+    }
+
     /// Ancestors of `node`, nearest first.
     fn ancestors(&self, node: usize) -> Vec<usize> {
         let mut out = Vec::new();
@@ -106,11 +130,39 @@ impl<'a> Source<'a> {
 }
 
 fn import(bytes: &[u8], base_dir: Option<&Path>, file: &str) -> Result<GltfDocument, GltfError> {
+    let parse = |e: gltf::Error| GltfError::Parse {
+        file: file.to_owned(),
+        message: e.to_string(),
+    };
     let gltf::Gltf { document, blob } =
-        gltf::Gltf::from_slice(bytes).map_err(|e| GltfError::Parse {
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(parse)?;
+    let root = document.into_json();
+    // gltf-json's POSITION min/max hook indexes `accessors` before the index checks run.
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            if let Some((_, idx)) = prim
+                .attributes
+                .iter()
+                .find(|(_, i)| i.value() >= root.accessors.len())
+            {
+                return Err(GltfError::Field {
+                    file: file.to_owned(),
+                    field: format!("meshes[{mi}].primitives[{pi}].attributes"),
+                    reason: format!("accessor {} does not exist", idx.value()),
+                });
+            }
+        }
+    }
+    let document = gltf::Document::from_json(root).map_err(parse)?;
+    // gltf-json's validation lets some unrecognised enum values through (e.g. an animation
+    // target `path`) and the accessors later unwrap them; serialising finds every such value.
+    if let Err(e) = serde_json::to_writer(std::io::sink(), document.as_json()) {
+        return Err(GltfError::Field {
             file: file.to_owned(),
-            message: e.to_string(),
-        })?;
+            field: "(an enum field: path, interpolation, mode, type or componentType)".into(),
+            reason: format!("holds an unrecognised value: {e}"),
+        });
+    }
     let buffers = load_buffers(&document, blob, base_dir, file)?;
     check_accessors(&document, &buffers, file)?;
     let (nodes, local_matrices) = read_nodes(&document, file)?;
@@ -243,6 +295,7 @@ fn read_primitive(
     field: &str,
 ) -> Result<PrimitiveData, GltfError> {
     use gltf::mesh::Mode;
+    check_attributes(src, prim, field)?;
     let reader = prim.reader(src.data());
     let positions: Vec<Vec3> = reader
         .read_positions()
@@ -341,6 +394,41 @@ fn read_primitive(
         colors,
         triangles,
     })
+}
+
+/// Element types the glTF spec allows for the attributes we read.
+fn check_attributes(
+    src: &Source<'_>,
+    prim: &gltf::Primitive<'_>,
+    field: &str,
+) -> Result<(), GltfError> {
+    use DataType::{F32, U8, U16, U32};
+    use gltf::Semantic as S;
+    for (semantic, acc) in prim.attributes() {
+        let f = format!("{field}.attributes.{}", semantic.to_string());
+        match semantic {
+            S::Positions | S::Normals => src.expect(&acc, &[Dimensions::Vec3], &[F32], &f)?,
+            S::TexCoords(_) => src.expect(&acc, &[Dimensions::Vec2], &[F32, U8, U16], &f)?,
+            S::Colors(_) => src.expect(
+                &acc,
+                &[Dimensions::Vec3, Dimensions::Vec4],
+                &[F32, U8, U16],
+                &f,
+            )?,
+            S::Joints(_) => src.expect(&acc, &[Dimensions::Vec4], &[U8, U16], &f)?,
+            S::Weights(_) => src.expect(&acc, &[Dimensions::Vec4], &[F32, U8, U16], &f)?,
+            S::Tangents => src.expect(&acc, &[Dimensions::Vec4], &[F32], &f)?,
+        }
+    }
+    if let Some(acc) = prim.indices() {
+        src.expect(
+            &acc,
+            &[Dimensions::Scalar],
+            &[U8, U16, U32],
+            &format!("{field}.indices"),
+        )?;
+    }
+    Ok(())
 }
 
 /// Per-vertex `(skin joint, weight)` pairs over every `JOINTS_n`/`WEIGHTS_n` set, zero
@@ -517,6 +605,14 @@ fn read_skin(src: &Source<'_>, skin: &gltf::Skin<'_>) -> Result<GltfSkin, GltfEr
                 format!("node {j} is listed twice"),
             ));
         }
+    }
+    if let Some(acc) = skin.inverse_bind_matrices() {
+        src.expect(
+            &acc,
+            &[Dimensions::Mat4],
+            &[DataType::F32],
+            &format!("{field}.inverseBindMatrices"),
+        )?;
     }
     let ibm: Vec<Mat4> = match skin.reader(src.data()).read_inverse_bind_matrices() {
         Some(it) => it.map(|m| Mat4::from_cols_array_2d(&m)).collect(),
