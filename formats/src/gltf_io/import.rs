@@ -153,6 +153,18 @@ fn import(bytes: &[u8], base_dir: Option<&Path>, file: &str) -> Result<GltfDocum
             }
         }
     }
+    // gltf-json does not validate animation channel targets at all.
+    for (ai, anim) in root.animations.iter().enumerate() {
+        for (ci, ch) in anim.channels.iter().enumerate() {
+            if ch.target.node.value() >= root.nodes.len() {
+                return Err(GltfError::Field {
+                    file: file.to_owned(),
+                    field: format!("animations[{ai}].channels[{ci}].target.node"),
+                    reason: format!("node {} does not exist", ch.target.node.value()),
+                });
+            }
+        }
+    }
     let document = gltf::Document::from_json(root).map_err(parse)?;
     // gltf-json's validation lets some unrecognised enum values through (e.g. an animation
     // target `path`) and the accessors later unwrap them; serialising finds every such value.
