@@ -15,6 +15,8 @@ mod animation;
 pub mod container;
 mod export;
 mod import;
+mod primitive;
+mod skin;
 
 use std::path::PathBuf;
 
