@@ -177,6 +177,7 @@ pub struct GltfSkin {
     pub skeleton: Skeleton,
     /// Every primitive skinned by this skin, concatenated in file order, positions in the
     /// skin's bind space (the mesh node's own transform does not apply, as glTF defines).
+    /// Empty when no mesh node uses the skin.
     pub template: Template,
     /// Normalised weights; joint indices refer to `skeleton` joints.
     pub skin: StaticSkin,

@@ -237,9 +237,7 @@ pub(crate) fn read_skin(src: &Source<'_>, skin: &gltf::Skin<'_>) -> Result<GltfS
             }
         }
     }
-    if template.positions.is_empty() {
-        return Err(src.field(field, "no mesh node uses this skin"));
-    }
+    // A skin no mesh node uses is valid glTF: it keeps its skeleton and an empty template.
     let weights =
         StaticSkin::new(offsets, wj, ww, skeleton.len()).map_err(|source| GltfError::Weights {
             file: src.file.to_owned(),
