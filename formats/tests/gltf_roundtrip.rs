@@ -257,6 +257,15 @@ fn edited(
 fn hostile_fields_give_errors_naming_the_field() {
     let msg = |r: Result<_, GltfError>| r.err().map(|e| e.to_string()).unwrap_or_default();
     assert!(edited(|_| {}).is_ok());
+    // A skin that no mesh node uses is valid: its skeleton loads, its template is empty, and
+    // the mesh becomes a static mesh.
+    let unused = edited(|j| {
+        j["nodes"][5].as_object_mut().unwrap().remove("skin");
+    })
+    .unwrap();
+    assert_eq!(unused.skins[0].skeleton.len(), 4);
+    assert_eq!(unused.skins[0].template.vertex_count(), 0);
+    assert_eq!(unused.static_meshes.len(), 1);
     let m = msg(edited(|j| {
         j["accessors"][0]["count"] = serde_json::json!(u32::MAX)
     }));

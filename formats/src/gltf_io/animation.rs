@@ -143,10 +143,8 @@ impl Clip {
         let slot: HashMap<usize, usize> = nodes.iter().enumerate().map(|(k, &n)| (n, k)).collect();
         let mut out = defaults.to_vec();
         for ch in &self.channels {
-            if let Some(&k) = slot.get(&ch.node) {
-                if let Some(x) = out.get_mut(k) {
-                    ch.apply(t, x);
-                }
+            if let Some(x) = slot.get(&ch.node).and_then(|&k| out.get_mut(k)) {
+                ch.apply(t, x);
             }
         }
         out
@@ -184,10 +182,8 @@ impl Clip {
     pub fn sample_by_name(&self, skeleton: &Skeleton, defaults: &Pose, t: f32) -> Pose {
         let mut locals = defaults.locals.clone();
         for ch in &self.channels {
-            if let Some(j) = skeleton.find(&ch.node_name) {
-                if let Some(x) = locals.get_mut(j) {
-                    ch.apply(t, x);
-                }
+            if let Some(x) = skeleton.find(&ch.node_name).and_then(|j| locals.get_mut(j)) {
+                ch.apply(t, x);
             }
         }
         Pose { locals }

@@ -15,6 +15,8 @@ mod animation;
 pub mod container;
 mod export;
 mod import;
+mod primitive;
+mod skin;
 
 use std::path::PathBuf;
 
@@ -175,6 +177,7 @@ pub struct GltfSkin {
     pub skeleton: Skeleton,
     /// Every primitive skinned by this skin, concatenated in file order, positions in the
     /// skin's bind space (the mesh node's own transform does not apply, as glTF defines).
+    /// Empty when no mesh node uses the skin.
     pub template: Template,
     /// Normalised weights; joint indices refer to `skeleton` joints.
     pub skin: StaticSkin,
