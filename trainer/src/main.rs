@@ -20,6 +20,8 @@ enum Command {
     Version,
     /// Write the built-in synthetic multi-view capture (procedural clothed character).
     Synth(cli::synth::Args),
+    /// Describe a glTF/GLB or .skf file as one JSON object.
+    Inspect(cli::inspect::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -31,6 +33,7 @@ fn main() {
             Ok(())
         }
         Command::Synth(args) => cli::synth::run(args),
+        Command::Inspect(args) => cli::inspect::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.
