@@ -15,6 +15,7 @@ use skinfield_formats::{Skeleton, SkeletonError, SkinError, Template};
 pub mod body;
 pub mod character;
 pub mod deform;
+pub mod gltf_source;
 mod marching;
 pub mod motion;
 pub mod output;
@@ -22,6 +23,7 @@ pub mod rig;
 pub mod texture;
 pub mod weights;
 
+pub use gltf_source::{GltfSource, synthesize_gltf};
 pub use output::{SynthSummary, synthesize};
 
 /// Why a synthetic capture could not be made.
@@ -33,6 +35,9 @@ pub enum SynthError {
     /// The true weights are invalid.
     #[error("true weights: {0}")]
     Skin(#[from] SkinError),
+    /// The glTF character or motion could not be read.
+    #[error(transparent)]
+    Gltf(#[from] skinfield_formats::gltf_io::GltfError),
     /// Writing the capture failed.
     #[error(transparent)]
     Capture(#[from] CaptureError),

@@ -266,3 +266,78 @@ fn bulge_and_skirt_push_out_move_the_surface_beyond_dqs() {
         assert!((pushed[v] - base[v]).length() < 1e-6);
     }
 }
+
+#[test]
+fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
+    let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
+        return;
+    };
+    let source = GltfSource {
+        character: data.join("quaternius-witch/Witch.gltf"),
+        motion: None,
+        train_clips: vec!["Walk".into()],
+        test_clips: vec!["Kick_Left".into()],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig {
+        train_frames_per_clip: 2,
+        test_frames_per_clip: 2,
+        ..SynthConfig::tiny()
+    };
+    let summary = synthesize_gltf(dir.path(), &config, &source).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    assert_eq!((summary.joints, cap.template.vertex_count()), (62, 13884));
+    assert_eq!(
+        (cap.train_frames.clone(), cap.test_frames.clone()),
+        (vec![0, 1], vec![2, 3])
+    );
+    let mask = cap.load_mask(0, 2).unwrap();
+    assert!(
+        mask.inside.iter().filter(|&&m| m).count() > 50,
+        "the witch is in view"
+    );
+    // The ground truth (DQS + bulge with the artist weights) differs from LBS with the same
+    // weights on a kick, so static LBS cannot reproduce it.
+    let weights = cap.evaluation_true_weights().unwrap().unwrap();
+    let gt = cap.evaluation_gt_mesh(2).unwrap();
+    let l = lbs(
+        &cap.skeleton,
+        &weights,
+        &cap.template.positions,
+        &cap.poses[2],
+    )
+    .unwrap();
+    let max = gt
+        .iter()
+        .zip(&l)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0f32, f32::max);
+    let height = cap.template.bounds().unwrap().size().y;
+    assert!(
+        max > 0.005 * height,
+        "GT vs LBS differ by at most {max} (height {height})"
+    );
+    // Clip names are checked.
+    let bad = GltfSource {
+        test_clips: vec!["Walk".into()],
+        ..source.clone()
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &config, &bad),
+        Err(SynthError::Config {
+            field: "test_clips",
+            ..
+        })
+    ));
+    let bad = GltfSource {
+        test_clips: vec!["Moonwalk".into()],
+        ..source
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &config, &bad),
+        Err(SynthError::Config {
+            field: "test_clips",
+            ..
+        })
+    ));
+}
