@@ -364,13 +364,7 @@ impl GroundTruthDeformer {
                     continue;
                 }
                 let mean = nb.iter().map(|&o| prev[o as usize]).sum::<Vec3>() / nb.len() as f32;
-                // Keep at least the vertex's own push so smoothing never pulls cloth into a leg.
-                let blended = 0.5 * prev[k] + 0.5 * mean;
-                *d = if blended.length_squared() > prev[k].length_squared() {
-                    blended
-                } else {
-                    prev[k].lerp(blended, 0.5)
-                };
+                *d = 0.5 * prev[k] + 0.5 * mean;
             }
         }
         for (k, &v) in self.skirt.iter().enumerate() {
