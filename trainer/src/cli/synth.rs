@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
+use skinfield_formats::capture::ImageFormat;
 use skinfield_trainer::synth::{GltfSource, SynthConfig, synthesize, synthesize_gltf};
 
 /// Arguments of `trainer synth`.
@@ -35,6 +36,9 @@ pub struct Args {
     /// Template vertex count after simplification (about; built-in character only).
     #[arg(long, default_value_t = SynthConfig::default().target_vertices)]
     pub vertices: usize,
+    /// Write the colour images as linear float EXR instead of 8-bit sRGB PNG.
+    #[arg(long)]
+    pub exr: bool,
     /// A rigged glTF/GLB character instead of the built-in one.
     #[arg(long)]
     pub character: Option<PathBuf>,
@@ -59,6 +63,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         height: args.resolution,
         grid: args.grid,
         target_vertices: args.vertices,
+        image_format: if args.exr {
+            ImageFormat::Exr
+        } else {
+            ImageFormat::Png
+        },
         seed: args.seed,
         ..SynthConfig::default()
     };

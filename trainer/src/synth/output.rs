@@ -9,7 +9,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use skinfield_formats::capture::{
     CAPTURE_FORMAT, CAPTURE_VERSION, CameraEntry, CaptureManifest, CaptureWriter, ClipEntry,
-    EvaluationEntry, ImageFormat, SourceEntry,
+    EvaluationEntry, SourceEntry,
 };
 use skinfield_formats::{Camera, CameraRig, Pose, Skeleton, Template};
 
@@ -167,7 +167,7 @@ pub fn write_subject(
         test_frames: test.clone(),
         images: "images".into(),
         masks: "masks".into(),
-        image_format: ImageFormat::Png,
+        image_format: config.image_format,
         evaluation: Some(EvaluationEntry {
             gt_meshes: "eval/gt".into(),
             true_weights: Some("eval/true_weights.json".into()),

@@ -359,3 +359,25 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
         })
     ));
 }
+
+#[test]
+fn exr_images_carry_the_same_pixels_as_png_before_quantisation() {
+    let (png, exr) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    synthesize(png.path(), &SynthConfig::tiny()).unwrap();
+    let config = SynthConfig {
+        image_format: skinfield_formats::capture::ImageFormat::Exr,
+        ..SynthConfig::tiny()
+    };
+    synthesize(exr.path(), &config).unwrap();
+    let (a, b) = (
+        load_capture(png.path()).unwrap(),
+        load_capture(exr.path()).unwrap(),
+    );
+    assert!(b.image_path(1, 2).extension().is_some_and(|e| e == "exr"));
+    let (pa, pb) = (a.load_image(1, 2).unwrap(), b.load_image(1, 2).unwrap());
+    // 8-bit sRGB quantisation is the only difference (at most ~0.5/255 · 2.4 in linear terms near white).
+    for (x, y) in pa.rgb.iter().zip(&pb.rgb) {
+        assert!((*x - *y).abs().max_element() < 0.006, "{x} vs {y}");
+    }
+    assert!(pb.rgb.iter().any(|p| p.max_element() > 0.1));
+}
