@@ -410,7 +410,7 @@ fn header_and_section_failures_each_have_their_variant() {
     for (offset, len) in [
         (data as u64, u64::MAX),
         (u64::MAX - 63, 64),
-        (u64::MAX & !63, 0),
+        (!63u64, 0),
         (data as u64, data_len as u64 + 1),
     ] {
         let e = parse_err(&patched(&b, |b| {
@@ -620,7 +620,7 @@ fn tensor_table_failures_each_have_their_variant() {
     }
     // Offsets: misaligned, overflowing, past DATA, overlapping the previous tensor.
     let w0_offset = u64_at(&b, w0 + 48);
-    for offset in [w0_offset + 2, u64::MAX - 1, u64::MAX & !63, data_len as u64] {
+    for offset in [w0_offset + 2, u64::MAX - 1, !63u64, data_len as u64] {
         let e = parse_err(&patched(&b, |b| put(b, w0 + 48, &offset.to_le_bytes())));
         assert_eq!(e, SkfError::TensorPlacement(l0), "offset {offset}");
     }
