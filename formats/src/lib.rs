@@ -15,6 +15,8 @@ extern crate alloc;
 #[cfg(feature = "std")]
 pub mod bvh;
 pub mod camera;
+#[cfg(feature = "std")]
+pub mod gltf_io;
 pub mod math;
 pub mod mesh;
 pub mod pose;
