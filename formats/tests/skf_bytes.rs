@@ -740,3 +740,30 @@ fn absurd_counts_and_offsets_are_refused_at_once() {
         assert!(expected, "{what}: {e}");
     }
 }
+
+/// Not a check: writes seed inputs for `cargo fuzz run skf` into `$SKINFIELD_FUZZ_SEEDS/skf`
+/// (`SKINFIELD_FUZZ_SEEDS=/tmp/seeds cargo test --workspace --test skf_bytes -- --ignored`).
+#[test]
+#[ignore = "writes fuzz seeds when SKINFIELD_FUZZ_SEEDS is set"]
+fn write_fuzz_seeds() {
+    let Some(dir) = std::env::var_os("SKINFIELD_FUZZ_SEEDS") else { return };
+    let dir = std::path::PathBuf::from(dir).join("skf");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (_, small) = small();
+    std::fs::write(dir.join("small.skf"), &small).unwrap();
+    // 24 joints and all three nets, with narrow layers so the file stays a few kilobytes.
+    let mut c = small_config();
+    c.joint_count = 24;
+    c.hidden[..2].copy_from_slice(&[4, 4]);
+    c.nets = Net::Skin.bit() | Net::Albedo.bit() | Net::Shadow.bit();
+    let mut m = model(c, 5);
+    for net in [Net::Albedo, Net::Shadow] {
+        let shapes: Vec<(usize, usize)> = c.layer_shapes(net).collect();
+        for (i, (out, inp)) in shapes.into_iter().enumerate() {
+            m.push_layer(net, i, vec![0.25; out * inp], out, inp, vec![-0.5; out]);
+        }
+    }
+    let bytes = m.to_bytes().unwrap();
+    SkfView::parse(&bytes).unwrap();
+    std::fs::write(dir.join("three_nets.skf"), &bytes).unwrap();
+}
