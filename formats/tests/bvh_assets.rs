@@ -926,19 +926,36 @@ fn cmu_clips_in_metres_stay_on_the_ground_and_keep_their_bones() {
 #[test]
 #[ignore = "writes fuzz seeds when SKINFIELD_FUZZ_SEEDS is set"]
 fn write_fuzz_seeds() {
-    let Some(dir) = std::env::var_os("SKINFIELD_FUZZ_SEEDS") else { return };
+    let Some(dir) = std::env::var_os("SKINFIELD_FUZZ_SEEDS") else {
+        return;
+    };
     let dir = std::path::PathBuf::from(dir).join("bvh");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("analytic.bvh"), ANALYTIC).unwrap();
-    let Some(data) = shared_data_dir() else { return };
+    let Some(data) = shared_data_dir() else {
+        return;
+    };
     for (file, ..) in CMU {
         let text = std::fs::read_to_string(data.join("mocap-cmu").join(file)).unwrap();
         let lines: Vec<&str> = text.lines().collect();
-        let time = lines.iter().position(|l| l.trim_start().starts_with("Frame Time")).unwrap();
+        let time = lines
+            .iter()
+            .position(|l| l.trim_start().starts_with("Frame Time"))
+            .unwrap();
         let motion = lines.iter().position(|l| l.trim() == "MOTION").unwrap();
         let head = lines[..motion].join("\n");
-        let seed = format!("{head}\nMOTION\nFrames: 2\n{}\n{}\n{}\n", lines[time], lines[time + 1], lines[time + 2]);
-        assert_eq!(parse_bvh(&seed, &BvhOptions::default()).unwrap().frame_count(), 2);
+        let seed = format!(
+            "{head}\nMOTION\nFrames: 2\n{}\n{}\n{}\n",
+            lines[time],
+            lines[time + 1],
+            lines[time + 2]
+        );
+        assert_eq!(
+            parse_bvh(&seed, &BvhOptions::default())
+                .unwrap()
+                .frame_count(),
+            2
+        );
         std::fs::write(dir.join(file), seed).unwrap();
     }
 }

@@ -746,7 +746,9 @@ fn absurd_counts_and_offsets_are_refused_at_once() {
 #[test]
 #[ignore = "writes fuzz seeds when SKINFIELD_FUZZ_SEEDS is set"]
 fn write_fuzz_seeds() {
-    let Some(dir) = std::env::var_os("SKINFIELD_FUZZ_SEEDS") else { return };
+    let Some(dir) = std::env::var_os("SKINFIELD_FUZZ_SEEDS") else {
+        return;
+    };
     let dir = std::path::PathBuf::from(dir).join("skf");
     std::fs::create_dir_all(&dir).unwrap();
     let (_, small) = small();

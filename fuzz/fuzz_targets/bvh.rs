@@ -10,10 +10,16 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(m) = parse_bvh(&text, &BvhOptions::default()) {
         assert_eq!(m.values.len(), m.frame_count() * m.channel_count());
         assert_eq!(m.channels.len(), m.skeleton.len());
-        assert!(m.end_sites.iter().all(|e| e.parent < m.skeleton.len() && e.offset.is_finite()));
+        assert!(
+            m.end_sites
+                .iter()
+                .all(|e| e.parent < m.skeleton.len() && e.offset.is_finite())
+        );
         let mut world = vec![Default::default(); m.skeleton.len()];
         for pose in &m.poses {
-            m.skeleton.world_matrices(pose, &mut world).expect("every pose fits the skeleton");
+            m.skeleton
+                .world_matrices(pose, &mut world)
+                .expect("every pose fits the skeleton");
         }
     }
 });

@@ -18,7 +18,9 @@ fn count_panics() {
     std::panic::set_hook(Box::new(|info| {
         let n = CAUGHT.fetch_add(1, Ordering::Relaxed) + 1;
         if n.is_power_of_two() {
-            eprintln!("gltf target: panic #{n} inside the import (caught unless a crash follows): {info}");
+            eprintln!(
+                "gltf target: panic #{n} inside the import (caught unless a crash follows): {info}"
+            );
         }
     }));
 }

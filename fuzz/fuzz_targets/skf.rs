@@ -9,7 +9,8 @@ use skinfield_formats::skf::{HEADER_LEN, Net, SkfView, file_checksum};
 fn exercise(v: &SkfView<'_>) {
     for t in v.tensors() {
         let mut out = vec![0.0; t.len()];
-        t.to_f32(&mut out).expect("buffer of the tensor's own length");
+        t.to_f32(&mut out)
+            .expect("buffer of the tensor's own length");
         let _ = (t.get(t.len()), t.as_f16(), t.name.as_str());
     }
     let s = v.skeleton();
