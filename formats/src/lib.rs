@@ -12,6 +12,8 @@
 
 extern crate alloc;
 
+#[cfg(feature = "std")]
+pub mod bvh;
 pub mod camera;
 #[cfg(feature = "std")]
 pub mod capture;
