@@ -1,2 +1,8 @@
 //! Skinfield trainer: bone-heat initial weights, synthetic captures, SkinNet training with
 //! candle, export to `.skf`, and evaluation against ground truth.
+
+pub mod distance_transform;
+pub mod geodesic;
+pub mod losses;
+pub mod optim;
+pub mod skinnet;
