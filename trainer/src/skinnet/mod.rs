@@ -223,6 +223,23 @@ impl SkinNet {
     }
 }
 
+impl SkinNet {
+    /// Convenience for exporters and cross-checks: weights of canonical `points` for each pose
+    /// feature vector in `poses` (each `3J`), flattened `[F, V, J]` row-major.
+    pub fn evaluate(&self, points: &[Vec3], poses: &[Vec<f32>]) -> Result<Vec<f32>> {
+        let dev = Device::Cpu;
+        let q = self.config.pose_width();
+        if poses.iter().any(|p| p.len() != q) {
+            candle_core::bail!("pose features must have {q} entries");
+        }
+        let enc = encode_positions(&self.config, points, &dev)?;
+        let flat: Vec<f32> = poses.iter().flatten().copied().collect();
+        let dt = self.layers.first().map_or(DType::F32, |l| l.v.dtype());
+        let w = self.forward(&enc.to_dtype(dt)?, &Tensor::from_vec(flat, (poses.len(), q), &dev)?.to_dtype(dt)?)?;
+        w.to_dtype(DType::F32)?.flatten_all()?.to_vec1()
+    }
+}
+
 /// `x̂ = 2(x̄ − bbox_min)/(bbox_max − bbox_min) − 1` for one point.
 #[must_use]
 pub fn normalise(config: &ModelConfig, x: Vec3) -> [f32; 3] {
