@@ -6,3 +6,4 @@ pub mod geodesic;
 pub mod losses;
 pub mod optim;
 pub mod skinnet;
+pub mod train;

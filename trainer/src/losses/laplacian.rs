@@ -36,8 +36,8 @@ impl UniformLaplacian {
         let v = positions.len();
         let mut index = vec![0u32; v * width];
         let mut weight = vec![0.0f32; v * width];
-        for i in 0..v {
-            let ring = graph.neighbours(node_of[i] as usize);
+        for (i, &node) in node_of.iter().enumerate() {
+            let ring = graph.neighbours(node as usize);
             let row = i * width;
             index[row..row + width].fill(i as u32);
             if ring.is_empty() {

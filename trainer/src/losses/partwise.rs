@@ -27,7 +27,7 @@ impl PartwiseReg {
         u: f32,
         device: &Device,
     ) -> Result<Self> {
-        if joints == 0 || init.len() % joints != 0 {
+        if joints == 0 || !init.len().is_multiple_of(joints) {
             candle_core::bail!(
                 "part-wise regulariser: {} initial weights for {joints} joints",
                 init.len()

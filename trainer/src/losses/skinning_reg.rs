@@ -65,7 +65,10 @@ impl GeodesicSkinningReg {
         exact_limit: usize,
         device: &Device,
     ) -> Result<Self> {
-        if joints == 0 || init.len() % joints != 0 || init.len() / joints != graph.node_of().len() {
+        if joints == 0
+            || !init.len().is_multiple_of(joints)
+            || init.len() / joints != graph.node_of().len()
+        {
             candle_core::bail!(
                 "geodesic regulariser: {} initial weights for {} vertices × {joints} joints",
                 init.len(),

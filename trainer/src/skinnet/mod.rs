@@ -235,7 +235,10 @@ impl SkinNet {
         let enc = encode_positions(&self.config, points, &dev)?;
         let flat: Vec<f32> = poses.iter().flatten().copied().collect();
         let dt = self.layers.first().map_or(DType::F32, |l| l.v.dtype());
-        let w = self.forward(&enc.to_dtype(dt)?, &Tensor::from_vec(flat, (poses.len(), q), &dev)?.to_dtype(dt)?)?;
+        let w = self.forward(
+            &enc.to_dtype(dt)?,
+            &Tensor::from_vec(flat, (poses.len(), q), &dev)?.to_dtype(dt)?,
+        )?;
         w.to_dtype(DType::F32)?.flatten_all()?.to_vec1()
     }
 }

@@ -24,7 +24,13 @@ pub struct LossWeights {
 
 impl Default for LossWeights {
     fn default() -> Self {
-        Self { silhouette_boundary: 1.0, silhouette_contour: 1.0, laplacian: 1e3, skinning: 10.0, partwise: 10.0 }
+        Self {
+            silhouette_boundary: 1.0,
+            silhouette_contour: 1.0,
+            laplacian: 1e3,
+            skinning: 10.0,
+            partwise: 10.0,
+        }
     }
 }
 
@@ -106,9 +112,18 @@ pub enum ConfigError {
 impl TrainConfig {
     /// Reads and validates a JSON configuration.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.to_owned(), source })?;
-        let c: Self = serde_json::from_str(&text).map_err(|source| ConfigError::Parse { path: path.to_owned(), source })?;
-        c.validate().map_err(|field| ConfigError::Field { path: path.to_owned(), field })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let c: Self = serde_json::from_str(&text).map_err(|source| ConfigError::Parse {
+            path: path.to_owned(),
+            source,
+        })?;
+        c.validate().map_err(|field| ConfigError::Field {
+            path: path.to_owned(),
+            field,
+        })?;
         Ok(c)
     }
 
@@ -159,7 +174,10 @@ mod tests {
         std::fs::write(&p, serde_json::to_string(&TrainConfig::default()).unwrap()).unwrap();
         assert_eq!(TrainConfig::load(&p).unwrap(), TrainConfig::default());
         std::fs::write(&p, r#"{"batch": 0}"#).unwrap();
-        assert!(matches!(TrainConfig::load(&p), Err(ConfigError::Field { field: "batch", .. })));
+        assert!(matches!(
+            TrainConfig::load(&p),
+            Err(ConfigError::Field { field: "batch", .. })
+        ));
         std::fs::write(&p, r#"{"iterations": 5, "bogus": 1}"#).unwrap();
         let e = TrainConfig::load(&p).unwrap_err().to_string();
         assert!(e.contains("bogus") && e.contains("c.json"), "{e}");

@@ -121,14 +121,21 @@ pub struct LossRecord {
 
 impl LossRecord {
     /// CSV header matching [`LossRecord::csv_row`].
-    pub const CSV_HEADER: &'static str = "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise";
+    pub const CSV_HEADER: &'static str =
+        "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise";
 
     /// One CSV row.
     #[must_use]
     pub fn csv_row(&self) -> String {
         format!(
             "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
-            self.iteration, self.total, self.silhouette_boundary, self.silhouette_contour, self.laplacian, self.skinning, self.partwise
+            self.iteration,
+            self.total,
+            self.silhouette_boundary,
+            self.silhouette_contour,
+            self.laplacian,
+            self.skinning,
+            self.partwise
         )
     }
 }
@@ -158,53 +165,111 @@ pub struct Trainer {
 
 fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {
     // Distinct, reproducible streams per (seed, phase, iteration).
-    ChaCha8Rng::seed_from_u64(seed ^ phase.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ iteration.wrapping_mul(0xbf58_476d_1ce4_e5b9))
+    ChaCha8Rng::seed_from_u64(
+        seed ^ phase.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            ^ iteration.wrapping_mul(0xbf58_476d_1ce4_e5b9),
+    )
 }
 
 impl Trainer {
     /// Prepares a run: checks the data, builds the constant loss data (Laplacian, geodesic
     /// penalty, rigid mask) and initialises the model from `config.seed`. `static_weights`
-    /// selects the baseline, whose logits start at `ln(w_init + 1e-4)`.
-    pub fn new(data: TrainData, config: TrainConfig, static_weights: bool) -> Result<Self, TrainError> {
-        config.validate().map_err(|f| TrainError::Data(format!("config field `{f}` is invalid")))?;
+    /// selects the baseline, whose logits start at `ln(w_init + 0.01)`.
+    pub fn new(
+        data: TrainData,
+        config: TrainConfig,
+        static_weights: bool,
+    ) -> Result<Self, TrainError> {
+        config
+            .validate()
+            .map_err(|f| TrainError::Data(format!("config field `{f}` is invalid")))?;
         let t = &data.template;
-        t.validate().map_err(|e| TrainError::Data(format!("template: {e}")))?;
+        t.validate()
+            .map_err(|e| TrainError::Data(format!("template: {e}")))?;
         let (v, j) = (t.vertex_count(), data.skeleton.len());
         if data.init_weights.len() != v * j {
-            return Err(TrainError::Data(format!("init_weights has {} entries, expected {v} × {j}", data.init_weights.len())));
+            return Err(TrainError::Data(format!(
+                "init_weights has {} entries, expected {v} × {j}",
+                data.init_weights.len()
+            )));
         }
         if data.frames.is_empty() {
             return Err(TrainError::Data("no training frames".into()));
         }
         for (i, f) in data.frames.iter().enumerate() {
             if f.skinning.len() != j || f.pose_features.len() != 3 * j {
-                return Err(TrainError::Data(format!("frame {i}: skinning/pose_features sized for another skeleton")));
+                return Err(TrainError::Data(format!(
+                    "frame {i}: skinning/pose_features sized for another skeleton"
+                )));
             }
         }
         let dev = Device::Cpu;
-        let bounds = t.bounds().ok_or_else(|| TrainError::Data("template has no bounds".into()))?;
+        let bounds = t
+            .bounds()
+            .ok_or_else(|| TrainError::Data("template has no bounds".into()))?;
         let (lo, hi) = (bounds.min, bounds.max);
         // A margin so points slightly outside the template (other resolutions) stay in [−1, 1].
         let pad = (hi - lo).max_element() * 0.05;
         let mc = ModelConfig::vinecs(j as u32, (lo - pad).to_array(), (hi + pad).to_array());
         let varmap = VarMap::new();
         let model = if static_weights {
-            let logits: Vec<f32> = data.init_weights.iter().map(|w| (w + 1e-4).ln()).collect();
+            // ε = 0.01 keeps zero weights within ~5 logit units: with ε = 1e-4 (−9.2) Adam's
+            // lr-sized steps needed hundreds of iterations before a zero weight could grow.
+            let logits: Vec<f32> = data.init_weights.iter().map(|w| (w + 1e-2).ln()).collect();
             let var = Var::from_tensor(&Tensor::from_vec(logits, (v, j), &dev)?)?;
-            varmap.data().lock().map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?.insert("static.logits".into(), var.clone());
+            varmap
+                .data()
+                .lock()
+                .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?
+                .insert("static.logits".into(), var.clone());
             Model::Static { logits: var }
         } else {
-            SkinNet::init_varmap(&varmap, &mc, PREFIX, config.seed, config.output_init_scale, &dev)?;
+            SkinNet::init_varmap(
+                &varmap,
+                &mc,
+                PREFIX,
+                config.seed,
+                config.output_init_scale,
+                &dev,
+            )?;
             let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
-            Model::Net { net: SkinNet::new(&vb.pp(PREFIX), mc)?, encoded: encode_positions(&mc, &t.positions, &dev)? }
+            Model::Net {
+                net: SkinNet::new(&vb.pp(PREFIX), mc)?,
+                encoded: encode_positions(&mc, &t.positions, &dev)?,
+            }
         };
         let graph = MeshGraph::new(&t.positions, &t.triangles);
-        let skinning = GeodesicSkinningReg::new(&graph, &data.init_weights, j, config.skinning_r, config.exact_diameter_limit, &dev)?;
-        let partwise = PartwiseReg::new(&data.init_weights, j, t.part_labels.as_deref(), config.partwise_u, &dev)?;
+        let skinning = GeodesicSkinningReg::new(
+            &graph,
+            &data.init_weights,
+            j,
+            config.skinning_r,
+            config.exact_diameter_limit,
+            &dev,
+        )?;
+        let partwise = PartwiseReg::new(
+            &data.init_weights,
+            j,
+            t.part_labels.as_deref(),
+            config.partwise_u,
+            &dev,
+        )?;
         let laplacian = UniformLaplacian::new(&t.positions, &t.triangles, &dev)?;
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let optimiser = Adam::from_varmap(&varmap, config.adam)?;
-        Ok(Self { config, data, model, varmap, optimiser, rest, laplacian, skinning, partwise, warm_done: 0, done: 0 })
+        Ok(Self {
+            config,
+            data,
+            model,
+            varmap,
+            optimiser,
+            rest,
+            laplacian,
+            skinning,
+            partwise,
+            warm_done: 0,
+            done: 0,
+        })
     }
 
     /// The network (`None` for the static baseline).
@@ -219,7 +284,9 @@ impl Trainer {
     /// The static baseline's weights `[V, J]` (`None` for SkinNet).
     pub fn static_weights(&self) -> Result<Option<Vec<f32>>, TrainError> {
         match &self.model {
-            Model::Static { logits } => Ok(Some(softmax_last(logits.as_tensor())?.flatten_all()?.to_vec1()?)),
+            Model::Static { logits } => Ok(Some(
+                softmax_last(logits.as_tensor())?.flatten_all()?.to_vec1()?,
+            )),
             Model::Net { .. } => Ok(None),
         }
     }
@@ -241,13 +308,21 @@ impl Trainer {
         let j = self.data.skeleton.len();
         Ok(match &self.model {
             Model::Net { net, encoded } => {
-                let poses: Vec<f32> = frames.iter().flat_map(|&f| self.data.frames[f].pose_features.iter().copied()).collect();
-                net.forward(encoded, &Tensor::from_vec(poses, (frames.len(), 3 * j), &Device::Cpu)?)?
+                let poses: Vec<f32> = frames
+                    .iter()
+                    .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
+                    .collect();
+                net.forward(
+                    encoded,
+                    &Tensor::from_vec(poses, (frames.len(), 3 * j), &Device::Cpu)?,
+                )?
             }
             Model::Static { logits } => {
                 let w = softmax_last(logits.as_tensor())?;
                 let (v, _) = w.dims2()?;
-                w.unsqueeze(0)?.broadcast_as((frames.len(), v, j))?.contiguous()?
+                w.unsqueeze(0)?
+                    .broadcast_as((frames.len(), v, j))?
+                    .contiguous()?
             }
         })
     }
@@ -255,7 +330,9 @@ impl Trainer {
     fn sample(&self, phase: u64, iteration: u64) -> Vec<usize> {
         let mut rng = frame_rng(self.config.seed, phase, iteration);
         let n = self.data.frames.len();
-        (0..self.config.batch).map(|_| rng.random_range(0..n)).collect()
+        (0..self.config.batch)
+            .map(|_| rng.random_range(0..n))
+            .collect()
     }
 
     /// One warm-start iteration: mean squared error to the initial weights on a random batch of
@@ -281,14 +358,20 @@ impl Trainer {
         let frames = self.sample(2, self.done);
         let w = self.weights(&frames)?;
         let b = frames.len();
-        let mats: Vec<Vec<Mat4>> = frames.iter().map(|&f| self.data.frames[f].skinning.clone()).collect();
+        let mats: Vec<Vec<Mat4>> = frames
+            .iter()
+            .map(|&f| self.data.frames[f].skinning.clone())
+            .collect();
         let posed = lbs(&w, &skinning_tensor(&mats, &Device::Cpu)?, &self.rest)?;
         let posed_values = posed.to_vec3::<f32>()?;
         let mut boundary = Vec::new();
         let mut contour = Vec::new();
         for (k, &f) in frames.iter().enumerate() {
             let xk = posed.get(k)?;
-            let pts: Vec<glam::Vec3> = posed_values[k].iter().map(|p| glam::Vec3::new(p[0], p[1], p[2])).collect();
+            let pts: Vec<glam::Vec3> = posed_values[k]
+                .iter()
+                .map(|p| glam::Vec3::new(p[0], p[1], p[2]))
+                .collect();
             for view in &self.data.frames[f].views {
                 let uv = project(&view.camera, &xk)?;
                 let valid = in_front(&view.camera, &pts);
@@ -299,7 +382,11 @@ impl Trainer {
         }
         let mean = |ts: Vec<Tensor>| -> Result<Tensor, TrainError> {
             let n = ts.len().max(1) as f64;
-            Ok(if ts.is_empty() { Tensor::zeros((), DType::F32, &Device::Cpu)? } else { (Tensor::stack(&ts, 0)?.sum_all()? / n)? })
+            Ok(if ts.is_empty() {
+                Tensor::zeros((), DType::F32, &Device::Cpu)?
+            } else {
+                (Tensor::stack(&ts, 0)?.sum_all()? / n)?
+            })
         };
         let sb = mean(boundary)?;
         let sc = mean(contour)?;
@@ -308,8 +395,14 @@ impl Trainer {
         let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
         let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
         let lw = self.config.weights;
-        let total = ((((((&sb * lw.silhouette_boundary)? + (&sc * lw.silhouette_contour)?)? + (&lap * lw.laplacian)?)? + (&skin * lw.skinning)?)?
-            + (&part * lw.partwise)?)?;
+        let terms = [
+            (&sb * lw.silhouette_boundary)?,
+            (&sc * lw.silhouette_contour)?,
+            (&lap * lw.laplacian)?,
+            (&skin * lw.skinning)?,
+            (&part * lw.partwise)?,
+        ];
+        let total = Tensor::stack(&terms, 0)?.sum_all()?;
         let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
         self.done += 1;
         let record = LossRecord {
@@ -328,34 +421,62 @@ impl Trainer {
     /// Writes parameters, optimiser state and progress to `path` (safetensors, atomically).
     pub fn save_checkpoint(&self, path: &Path) -> Result<(), TrainError> {
         let mut tensors: HashMap<String, Tensor> = self.optimiser.state_tensors()?;
-        let vars = self.varmap.data().lock().map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
+        let vars = self
+            .varmap
+            .data()
+            .lock()
+            .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
         for (k, v) in vars.iter() {
             tensors.insert(format!("param.{k}"), v.as_tensor().clone());
         }
-        let p = [self.warm_done, self.done].map(|x| [(x & 0xffff_ffff) as u32, (x >> 32) as u32]).concat();
+        let p = [self.warm_done, self.done]
+            .map(|x| [(x & 0xffff_ffff) as u32, (x >> 32) as u32])
+            .concat();
         tensors.insert("progress".into(), Tensor::new(p.as_slice(), &Device::Cpu)?);
         let tmp = path.with_extension("tmp");
         candle_core::safetensors::save(&tensors, &tmp)?;
-        std::fs::rename(&tmp, path).map_err(|source| TrainError::Io { path: path.to_owned(), source })
+        std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
+            path: path.to_owned(),
+            source,
+        })
     }
 
     /// Restores a checkpoint written by [`Trainer::save_checkpoint`] for the same data, config
     /// and model kind; training then continues exactly where it stopped.
     pub fn resume(&mut self, path: &Path) -> Result<(), TrainError> {
-        let bad = |reason: String| TrainError::Checkpoint { path: path.to_owned(), reason };
-        let tensors = candle_core::safetensors::load(path, &Device::Cpu).map_err(|e| bad(e.to_string()))?;
+        let bad = |reason: String| TrainError::Checkpoint {
+            path: path.to_owned(),
+            reason,
+        };
+        let tensors =
+            candle_core::safetensors::load(path, &Device::Cpu).map_err(|e| bad(e.to_string()))?;
         {
-            let vars = self.varmap.data().lock().map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
+            let vars = self
+                .varmap
+                .data()
+                .lock()
+                .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
             for (k, v) in vars.iter() {
-                let t = tensors.get(&format!("param.{k}")).ok_or_else(|| bad(format!("parameter `{k}` is missing")))?;
+                let t = tensors
+                    .get(&format!("param.{k}"))
+                    .ok_or_else(|| bad(format!("parameter `{k}` is missing")))?;
                 if t.shape() != v.shape() {
-                    return Err(bad(format!("parameter `{k}` has shape {:?}, expected {:?}", t.dims(), v.dims())));
+                    return Err(bad(format!(
+                        "parameter `{k}` has shape {:?}, expected {:?}",
+                        t.dims(),
+                        v.dims()
+                    )));
                 }
                 v.set(t)?;
             }
         }
-        self.optimiser.load_state_tensors(&tensors).map_err(|e| bad(e.to_string()))?;
-        let p = tensors.get("progress").ok_or_else(|| bad("`progress` is missing".into()))?.to_vec1::<u32>()?;
+        self.optimiser
+            .load_state_tensors(&tensors)
+            .map_err(|e| bad(e.to_string()))?;
+        let p = tensors
+            .get("progress")
+            .ok_or_else(|| bad("`progress` is missing".into()))?
+            .to_vec1::<u32>()?;
         if p.len() != 4 {
             return Err(bad("`progress` has the wrong length".into()));
         }
@@ -370,7 +491,10 @@ impl Trainer {
     pub fn run(&mut self, dir: &Path, progress: bool) -> Result<(), TrainError> {
         let io = |path: &Path| {
             let path = path.to_owned();
-            move |source: std::io::Error| TrainError::Io { path: path.clone(), source }
+            move |source: std::io::Error| TrainError::Io {
+                path: path.clone(),
+                source,
+            }
         };
         std::fs::create_dir_all(dir).map_err(io(dir))?;
         let csv_path = dir.join("losses.csv");
@@ -381,7 +505,12 @@ impl Trainer {
                 kept.extend(
                     text.lines()
                         .skip(1)
-                        .filter(|l| l.split(',').next().and_then(|i| i.parse::<u64>().ok()).is_some_and(|i| i <= self.done))
+                        .filter(|l| {
+                            l.split(',')
+                                .next()
+                                .and_then(|i| i.parse::<u64>().ok())
+                                .is_some_and(|i| i <= self.done)
+                        })
                         .map(str::to_string),
                 );
             }
@@ -389,10 +518,16 @@ impl Trainer {
         let mut csv = std::fs::File::create(&csv_path).map_err(io(&csv_path))?;
         writeln!(csv, "{}", kept.join("\n")).map_err(io(&csv_path))?;
         let total = self.config.warm_start_iterations + self.config.iterations;
-        let bar = if progress { indicatif::ProgressBar::new(total) } else { indicatif::ProgressBar::hidden() };
+        let bar = if progress {
+            indicatif::ProgressBar::new(total)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
         bar.set_style(
-            indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed_precise} eta {eta} {msg}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} {elapsed_precise} eta {eta} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         bar.set_position(self.warm_done + self.done);
         let ckpt = dir.join("checkpoint.safetensors");
@@ -406,7 +541,12 @@ impl Trainer {
             writeln!(csv, "{}", r.csv_row()).map_err(io(&csv_path))?;
             bar.set_message(format!(
                 "total {:.3} sil {:.2}/{:.2}px lap {:.2e} skin {:.2e} part {:.2e}",
-                r.total, r.silhouette_boundary, r.silhouette_contour, r.laplacian, r.skinning, r.partwise
+                r.total,
+                r.silhouette_boundary,
+                r.silhouette_contour,
+                r.laplacian,
+                r.skinning,
+                r.partwise
             ));
             bar.inc(1);
             if self.config.checkpoint_every > 0 && self.done % self.config.checkpoint_every == 0 {
