@@ -549,7 +549,9 @@ impl Trainer {
                 r.partwise
             ));
             bar.inc(1);
-            if self.config.checkpoint_every > 0 && self.done % self.config.checkpoint_every == 0 {
+            if self.config.checkpoint_every > 0
+                && self.done.is_multiple_of(self.config.checkpoint_every)
+            {
                 csv.flush().map_err(io(&csv_path))?;
                 self.save_checkpoint(&ckpt)?;
             }
