@@ -14,8 +14,9 @@ use crate::kernels::TILE;
 use crate::model::SkinNet;
 use crate::skinning::{Method, dqs, lbs};
 
-/// Per-thread working memory for the tile MLP: two activation buffers, 64-byte aligned.
-#[derive(Clone, Debug)]
+/// Per-thread working memory for the tile MLP: two activation buffers, 64-byte aligned (not
+/// `Clone`: a copy would lose the alignment; make another with [`Scratch::new`]).
+#[derive(Debug)]
 pub struct Scratch {
     buf: Vec<f32>,
     offset: usize,

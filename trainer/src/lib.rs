@@ -3,3 +3,9 @@
 
 pub mod raster;
 pub mod synth;
+pub mod distance_transform;
+pub mod geodesic;
+pub mod losses;
+pub mod optim;
+pub mod skinnet;
+pub mod train;

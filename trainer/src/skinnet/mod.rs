@@ -1,0 +1,286 @@
+//! SkinNet (paper §3.2, supplementary D): `w = softmax(MLP([x̂, γ(x̂), θ̃]))`.
+//!
+//! The architecture comes from [`ModelConfig`] (the same definition the `.skf` file stores and
+//! the runtime reads): hidden widths, the skip layer that takes `[h, input]`, Softplus β, the
+//! positional-encoding frequency count. Linear layers are weight-normalised (`w = g · v/‖v‖` per
+//! output row, Salimans & Kingma 2016) during training; [`export`] folds that into plain weights.
+//!
+//! One forward pass evaluates `V` canonical vertices under `F` poses. The first layer and the
+//! skip layer see `[position part, pose part]`; their matmuls are split so that the position
+//! part is computed once per vertex (`[V, out]`), the pose part once per frame (`[F, out]`), and
+//! the two are broadcast-added to `[F·V, out]` — instead of multiplying an `[F·V, in]` input.
+
+pub mod export;
+pub mod softplus;
+
+use candle_core::{DType, Device, Result, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use skinfield_formats::skf::{ModelConfig, Net};
+
+pub use softplus::{softmax_last, softplus, softplus_composite};
+
+/// Which Softplus implementation the forward pass uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Activation {
+    /// The fused op ([`softplus::Softplus`]).
+    #[default]
+    Fused,
+    /// candle primitives (the reference for tests and the bench).
+    Composite,
+}
+
+/// A weight-normalised linear layer: `y = x · (g ⊙ v/‖v‖_row)ᵀ + b`.
+#[derive(Clone, Debug)]
+pub struct WnLinear {
+    v: Tensor,
+    g: Tensor,
+    b: Tensor,
+}
+
+impl WnLinear {
+    /// Reads `v` `[out, in]`, `g` `[out]` and `b` `[out]` from `vb` (scoped to this layer).
+    pub fn new(vb: &VarBuilder, out: usize, inp: usize) -> Result<Self> {
+        Ok(Self {
+            v: vb.get((out, inp), "v")?,
+            g: vb.get(out, "g")?,
+            b: vb.get(out, "b")?,
+        })
+    }
+
+    /// The effective weight `g ⊙ v/‖v‖` `[out, in]` (differentiable in `v` and `g`).
+    pub fn weight(&self) -> Result<Tensor> {
+        let norm = self.v.sqr()?.sum_keepdim(1)?.sqrt()?;
+        self.v
+            .broadcast_mul(&self.g.unsqueeze(1)?.broadcast_div(&norm)?)
+    }
+
+    /// The bias `[out]`.
+    #[must_use]
+    pub fn bias(&self) -> &Tensor {
+        &self.b
+    }
+}
+
+/// SkinNet: weight-normalised MLP with a skip connection, Softplus, softmax over joints.
+#[derive(Clone, Debug)]
+pub struct SkinNet {
+    config: ModelConfig,
+    layers: Vec<WnLinear>,
+    activation: Activation,
+}
+
+/// Parameter-name prefix of SkinNet inside a [`VarMap`] (matches [`Net::prefix`]).
+pub const PREFIX: &str = "skin";
+
+impl SkinNet {
+    /// Builds the layers from a `VarBuilder` already scoped to the net (e.g. `vb.pp("skin")`);
+    /// layer `i` reads `l{i}.v`, `l{i}.g`, `l{i}.b`.
+    pub fn new(vb: &VarBuilder, config: ModelConfig) -> Result<Self> {
+        if let Err(e) = config.validate() {
+            candle_core::bail!("SkinNet config: {e}");
+        }
+        let layers = config
+            .layer_shapes(Net::Skin)
+            .enumerate()
+            .map(|(i, (out, inp))| WnLinear::new(&vb.pp(format!("l{i}")), out, inp))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            config,
+            layers,
+            activation: Activation::Fused,
+        })
+    }
+
+    /// Fills `varmap` with seeded initial parameters under `prefix` (`skin.l{i}.{v,g,b}`):
+    /// `v` and `b` uniform in `±1/√in` (PyTorch's Linear default), `g = ‖v‖_row` so the first
+    /// effective weight equals `v`. The output layer is scaled by `out_scale` (small values start
+    /// near uniform weights; the warm start then regresses the initial skinning).
+    pub fn init_varmap(
+        varmap: &VarMap,
+        config: &ModelConfig,
+        prefix: &str,
+        seed: u64,
+        out_scale: f32,
+        device: &Device,
+    ) -> Result<()> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
+        let mut data = varmap
+            .data()
+            .lock()
+            .map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
+        for (i, &(out, inp)) in shapes.iter().enumerate() {
+            let bound = 1.0 / (inp as f32).sqrt();
+            let scale = if i + 1 == shapes.len() {
+                out_scale
+            } else {
+                1.0
+            };
+            let v: Vec<f32> = (0..out * inp)
+                .map(|_| scale * rng.random_range(-bound..bound))
+                .collect();
+            let g: Vec<f32> = v
+                .chunks(inp)
+                .map(|r| r.iter().map(|x| x * x).sum::<f32>().sqrt())
+                .collect();
+            let b: Vec<f32> = (0..out)
+                .map(|_| scale * rng.random_range(-bound..bound))
+                .collect();
+            let name = |p: &str| format!("{prefix}.l{i}.{p}");
+            data.insert(
+                name("v"),
+                Var::from_tensor(&Tensor::from_vec(v, (out, inp), device)?)?,
+            );
+            data.insert(
+                name("g"),
+                Var::from_tensor(&Tensor::from_vec(g, out, device)?)?,
+            );
+            data.insert(
+                name("b"),
+                Var::from_tensor(&Tensor::from_vec(b, out, device)?)?,
+            );
+        }
+        Ok(())
+    }
+
+    /// A freshly initialised SkinNet and the `VarMap` holding its parameters (f32, CPU).
+    pub fn seeded(config: ModelConfig, seed: u64, out_scale: f32) -> Result<(Self, VarMap)> {
+        let varmap = VarMap::new();
+        Self::init_varmap(&varmap, &config, PREFIX, seed, out_scale, &Device::Cpu)?;
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+        Ok((Self::new(&vb.pp(PREFIX), config)?, varmap))
+    }
+
+    /// Chooses the Softplus implementation.
+    #[must_use]
+    pub fn with_activation(mut self, activation: Activation) -> Self {
+        self.activation = activation;
+        self
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &ModelConfig {
+        &self.config
+    }
+
+    /// The layers, hidden first, then the output layer.
+    #[must_use]
+    pub fn layers(&self) -> &[WnLinear] {
+        &self.layers
+    }
+
+    fn act(&self, x: &Tensor) -> Result<Tensor> {
+        match self.activation {
+            Activation::Fused => softplus(x, self.config.softplus_beta),
+            Activation::Composite => softplus_composite(x, self.config.softplus_beta),
+        }
+    }
+
+    /// Skinning weights `[F, V, J]` for encoded positions `[V, 3 + 6L]` ([`encode_positions`])
+    /// and pose features `[F, 3J]`; rows sum to one.
+    pub fn forward(&self, positions: &Tensor, poses: &Tensor) -> Result<Tensor> {
+        let (v, p) = positions.dims2()?;
+        let (f, q) = poses.dims2()?;
+        if p != self.config.position_width() || q != self.config.pose_width() {
+            candle_core::bail!(
+                "SkinNet input widths {p} + {q}, expected {} + {}",
+                self.config.position_width(),
+                self.config.pose_width()
+            );
+        }
+        let n = self.layers.len() - 1;
+        let skip = self.config.skip_layer as usize;
+        // Position part [V, out] + (pose part + bias) [F, out], broadcast to [F·V, out].
+        let split = |w: &Tensor, b: &Tensor, at: usize| -> Result<Tensor> {
+            let wp = w.narrow(1, at, p)?;
+            let wq = w.narrow(1, at + p, q)?;
+            let a = positions.matmul(&wp.t()?)?;
+            let c = poses.matmul(&wq.t()?)?.broadcast_add(b)?;
+            a.unsqueeze(0)?
+                .broadcast_add(&c.unsqueeze(1)?)?
+                .reshape((f * v, w.dim(0)?))
+        };
+        let mut h: Option<Tensor> = None;
+        for (i, layer) in self.layers.iter().enumerate() {
+            let w = layer.weight()?;
+            let z = match &h {
+                None => split(&w, &layer.b, 0)?,
+                Some(h) if i == skip => {
+                    let prev = h.dim(1)?;
+                    let zh = h.matmul(&w.narrow(1, 0, prev)?.t()?)?;
+                    (zh + split(&w, &layer.b, prev)?)?
+                }
+                Some(h) => h.matmul(&w.t()?)?.broadcast_add(&layer.b)?,
+            };
+            h = Some(if i < n { self.act(&z)? } else { z });
+        }
+        let logits = h.ok_or_else(|| candle_core::Error::Msg("SkinNet has no layers".into()))?;
+        softmax_last(&logits)?.reshape((f, v, self.config.joint_count as usize))
+    }
+}
+
+impl SkinNet {
+    /// Convenience for exporters and cross-checks: weights of canonical `points` for each pose
+    /// feature vector in `poses` (each `3J`), flattened `[F, V, J]` row-major.
+    pub fn evaluate(&self, points: &[Vec3], poses: &[Vec<f32>]) -> Result<Vec<f32>> {
+        let dev = Device::Cpu;
+        let q = self.config.pose_width();
+        if poses.iter().any(|p| p.len() != q) {
+            candle_core::bail!("pose features must have {q} entries");
+        }
+        let enc = encode_positions(&self.config, points, &dev)?;
+        let flat: Vec<f32> = poses.iter().flatten().copied().collect();
+        let dt = self.layers.first().map_or(DType::F32, |l| l.v.dtype());
+        let w = self.forward(
+            &enc.to_dtype(dt)?,
+            &Tensor::from_vec(flat, (poses.len(), q), &dev)?.to_dtype(dt)?,
+        )?;
+        w.to_dtype(DType::F32)?.flatten_all()?.to_vec1()
+    }
+}
+
+/// `x̂ = 2(x̄ − bbox_min)/(bbox_max − bbox_min) − 1` for one point.
+#[must_use]
+pub fn normalise(config: &ModelConfig, x: Vec3) -> [f32; 3] {
+    let mut out = [0.0; 3];
+    for k in 0..3 {
+        out[k] =
+            2.0 * (x[k] - config.bbox_min[k]) / (config.bbox_max[k] - config.bbox_min[k]) - 1.0;
+    }
+    out
+}
+
+/// `[x̂, γ(x̂)]` for each point: `x̂` (3), then for `k` in `0..L`: `sin(2^k π x̂)` (3),
+/// `cos(2^k π x̂)` (3). Row-major `[V, 3 + 6L]`.
+#[must_use]
+pub fn encode_positions_vec(config: &ModelConfig, points: &[Vec3]) -> Vec<f32> {
+    let width = config.position_width();
+    let mut out = Vec::with_capacity(points.len() * width);
+    for &x in points {
+        let xh = normalise(config, x);
+        out.extend_from_slice(&xh);
+        // In f64 like the runtime: at k = 5 the argument is ~100 rad, where f32 would lose ~1e-5.
+        for k in 0..config.pe_frequencies {
+            let freq = f64::from(1u32 << k) * core::f64::consts::PI;
+            out.extend(xh.iter().map(|&c| (freq * f64::from(c)).sin() as f32));
+            out.extend(xh.iter().map(|&c| (freq * f64::from(c)).cos() as f32));
+        }
+    }
+    out
+}
+
+/// [`encode_positions_vec`] as an f32 tensor `[V, 3 + 6L]` on `device`.
+pub fn encode_positions(config: &ModelConfig, points: &[Vec3], device: &Device) -> Result<Tensor> {
+    Tensor::from_vec(
+        encode_positions_vec(config, points),
+        (points.len(), config.position_width()),
+        device,
+    )
+}
+
+#[cfg(test)]
+mod tests;

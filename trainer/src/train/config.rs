@@ -1,0 +1,187 @@
+//! Stage-1 training configuration (a JSON file; every field has a default).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::optim::AdamConfig;
+
+/// Loss weights λ of the stage-1 objective.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LossWeights {
+    /// Silhouette, boundary-vertex term (mean distance in pixels per boundary vertex).
+    pub silhouette_boundary: f64,
+    /// Silhouette, contour-pixel term (mean distance in pixels per contour pixel).
+    pub silhouette_contour: f64,
+    /// Laplacian (mean squared norm per vertex, metres²).
+    pub laplacian: f64,
+    /// Geodesic skinning regulariser (mean per vertex).
+    pub skinning: f64,
+    /// Part-wise regulariser (mean per rigid skin vertex).
+    pub partwise: f64,
+}
+
+impl Default for LossWeights {
+    fn default() -> Self {
+        Self {
+            silhouette_boundary: 1.0,
+            silhouette_contour: 1.0,
+            laplacian: 1e3,
+            skinning: 10.0,
+            partwise: 10.0,
+        }
+    }
+}
+
+/// Everything a stage-1 run depends on besides the data.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Seed of the parameter initialisation and of the frame sampling.
+    pub seed: u64,
+    /// Image-loss iterations.
+    pub iterations: u64,
+    /// Frames per iteration (paper: 4).
+    pub batch: usize,
+    /// Warm-start iterations regressing the initial weights before the image losses.
+    pub warm_start_iterations: u64,
+    /// Adam settings (paper: lr 1e-3, gradient values clipped to [−1, 1]).
+    pub adam: AdamConfig,
+    /// Loss weights.
+    pub weights: LossWeights,
+    /// Geodesic regulariser exponent r (paper: 3).
+    pub skinning_r: f32,
+    /// Part-wise rigidity threshold u (paper: 0.95).
+    pub partwise_u: f32,
+    /// Exact geodesic `d_max` up to this many graph nodes (double sweep above).
+    pub exact_diameter_limit: usize,
+    /// Write a checkpoint every this many iterations (0: only at the end).
+    pub checkpoint_every: u64,
+    /// Scale of the initial output layer (small: near-uniform weights before the warm start).
+    pub output_init_scale: f32,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            seed: 0,
+            iterations: 300,
+            batch: 4,
+            warm_start_iterations: 300,
+            adam: AdamConfig::default(),
+            weights: LossWeights::default(),
+            skinning_r: crate::losses::skinning_reg::PAPER_R,
+            partwise_u: crate::losses::partwise::PAPER_U,
+            exact_diameter_limit: 4096,
+            checkpoint_every: 100,
+            output_init_scale: 0.1,
+        }
+    }
+}
+
+/// Why a configuration file could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// Reading failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// Not valid JSON for a [`TrainConfig`] (serde names the field).
+    #[error("{path}: {source}")]
+    Parse {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The cause.
+        source: serde_json::Error,
+    },
+    /// A value out of range.
+    #[error("{path}: field `{field}` is invalid")]
+    Field {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The field.
+        field: &'static str,
+    },
+}
+
+impl TrainConfig {
+    /// Reads and validates a JSON configuration.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let c: Self = serde_json::from_str(&text).map_err(|source| ConfigError::Parse {
+            path: path.to_owned(),
+            source,
+        })?;
+        c.validate().map_err(|field| ConfigError::Field {
+            path: path.to_owned(),
+            field,
+        })?;
+        Ok(c)
+    }
+
+    /// Checks ranges; returns the first bad field.
+    pub fn validate(&self) -> Result<(), &'static str> {
+        if self.batch == 0 || self.batch > 64 {
+            return Err("batch");
+        }
+        if !(self.adam.lr.is_finite() && self.adam.lr > 0.0) {
+            return Err("adam.lr");
+        }
+        if self.adam.clip.is_some_and(|c| !(c.is_finite() && c > 0.0)) {
+            return Err("adam.clip");
+        }
+        let w = self.weights;
+        for (v, f) in [
+            (w.silhouette_boundary, "weights.silhouette_boundary"),
+            (w.silhouette_contour, "weights.silhouette_contour"),
+            (w.laplacian, "weights.laplacian"),
+            (w.skinning, "weights.skinning"),
+            (w.partwise, "weights.partwise"),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(f);
+            }
+        }
+        if !(self.skinning_r.is_finite() && self.skinning_r > 0.0) {
+            return Err("skinning_r");
+        }
+        if !(0.0..1.0).contains(&self.partwise_u) {
+            return Err("partwise_u");
+        }
+        if !(self.output_init_scale.is_finite() && self.output_init_scale > 0.0) {
+            return Err("output_init_scale");
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_round_trip_and_bad_fields_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.json");
+        std::fs::write(&p, serde_json::to_string(&TrainConfig::default()).unwrap()).unwrap();
+        assert_eq!(TrainConfig::load(&p).unwrap(), TrainConfig::default());
+        std::fs::write(&p, r#"{"batch": 0}"#).unwrap();
+        assert!(matches!(
+            TrainConfig::load(&p),
+            Err(ConfigError::Field { field: "batch", .. })
+        ));
+        std::fs::write(&p, r#"{"iterations": 5, "bogus": 1}"#).unwrap();
+        let e = TrainConfig::load(&p).unwrap_err().to_string();
+        assert!(e.contains("bogus") && e.contains("c.json"), "{e}");
+        std::fs::write(&p, r#"{"iterations": 5}"#).unwrap();
+        assert_eq!(TrainConfig::load(&p).unwrap().iterations, 5);
+    }
+}

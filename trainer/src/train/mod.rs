@@ -1,0 +1,567 @@
+//! Stage 1 of the paper (§3.4): SkinNet trained from multi-view silhouettes without the
+//! rendering loss, plus the static-weights baseline of the ablation (one pose-independent set of
+//! per-vertex weights under the same supervision).
+//!
+//! The loop is library code over [`TrainData`] (template, skeleton, initial weights, per-frame
+//! skinning matrices, pose features and silhouette targets); loading a capture into it is the
+//! caller's job. Objective per iteration, over a batch of frames `b` and their views `c`:
+//!
+//! `λ_sb·mean_{b,c} (L_B/|B|) + λ_sc·mean_{b,c} (L_P/|P|) + λ_lap·L_lap/(B·V) + λ_skin·L_skin/(B·V)
+//!  + λ_part·L_part/(B·|R∩G|)`
+//!
+//! The paper sums every term; the means here make the weights independent of the template
+//! resolution, the image size and the number of cameras. Before the image losses a warm start
+//! regresses the initial weights (mean squared error), so SkinNet starts from bone heat instead of
+//! from a uniform blend. Frame sampling draws from a generator seeded by `(seed, iteration)`, so a
+//! resumed run draws the same batches as an uninterrupted one.
+
+pub mod config;
+
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use candle_core::{DType, Device, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
+use glam::Mat4;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use skinfield_formats::skf::ModelConfig;
+use skinfield_formats::{Camera, Skeleton, Template};
+
+use crate::geodesic::MeshGraph;
+use crate::losses::laplacian::UniformLaplacian;
+use crate::losses::lbs::{lbs, rest_homogeneous, skinning_tensor};
+use crate::losses::partwise::PartwiseReg;
+use crate::losses::projection::{in_front, project};
+use crate::losses::silhouette::{SilhouetteTarget, silhouette_terms};
+use crate::losses::skinning_reg::GeodesicSkinningReg;
+use crate::optim::Adam;
+use crate::skinnet::{PREFIX, SkinNet, encode_positions, softmax_last};
+pub use config::{ConfigError, LossWeights, TrainConfig};
+
+/// One camera view of a training frame.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// The calibrated camera.
+    pub camera: Camera,
+    /// Distance transform and contour of the foreground mask.
+    pub target: SilhouetteTarget,
+}
+
+/// One training frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Skinning matrices (`world · inverse_bind`), one per joint.
+    pub skinning: Vec<Mat4>,
+    /// Pose features θ̃ (`3J`).
+    pub pose_features: Vec<f32>,
+    /// The views that see it.
+    pub views: Vec<View>,
+}
+
+/// Everything stage 1 trains on.
+#[derive(Clone, Debug)]
+pub struct TrainData {
+    /// The skeleton (its joint order is SkinNet's output order).
+    pub skeleton: Skeleton,
+    /// The (possibly reduced-resolution) template.
+    pub template: Template,
+    /// Initial weights, dense `[V, J]` row-major (bone heat or the asset's).
+    pub init_weights: Vec<f32>,
+    /// Training frames.
+    pub frames: Vec<Frame>,
+}
+
+/// Why training cannot start or continue.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// The data are inconsistent (names the field).
+    #[error("training data: {0}")]
+    Data(String),
+    /// A tensor operation failed.
+    #[error("candle: {0}")]
+    Candle(#[from] candle_core::Error),
+    /// A file could not be written or read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A checkpoint does not match this run.
+    #[error("{path}: {reason}")]
+    Checkpoint {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// The loss values of one iteration (already weighted terms are not stored: raw means).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LossRecord {
+    /// Iteration (1-based, image-loss phase).
+    pub iteration: u64,
+    /// Weighted total.
+    pub total: f64,
+    /// Mean boundary-vertex distance (pixels).
+    pub silhouette_boundary: f64,
+    /// Mean contour-pixel distance (pixels).
+    pub silhouette_contour: f64,
+    /// Mean squared Laplacian per vertex.
+    pub laplacian: f64,
+    /// Mean geodesic penalty per vertex.
+    pub skinning: f64,
+    /// Mean squared deviation per rigid skin vertex.
+    pub partwise: f64,
+}
+
+impl LossRecord {
+    /// CSV header matching [`LossRecord::csv_row`].
+    pub const CSV_HEADER: &'static str =
+        "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise";
+
+    /// One CSV row.
+    #[must_use]
+    pub fn csv_row(&self) -> String {
+        format!(
+            "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
+            self.iteration,
+            self.total,
+            self.silhouette_boundary,
+            self.silhouette_contour,
+            self.laplacian,
+            self.skinning,
+            self.partwise
+        )
+    }
+}
+
+/// What is being optimised.
+enum Model {
+    /// SkinNet with the template's encoded positions `[V, 3 + 6L]`.
+    Net { net: SkinNet, encoded: Tensor },
+    /// Static baseline: per-vertex logits `[V, J]`, weights = softmax.
+    Static { logits: Var },
+}
+
+/// A stage-1 run in progress.
+pub struct Trainer {
+    config: TrainConfig,
+    data: TrainData,
+    model: Model,
+    varmap: VarMap,
+    optimiser: Adam,
+    rest: Tensor,
+    laplacian: UniformLaplacian,
+    skinning: GeodesicSkinningReg,
+    partwise: PartwiseReg,
+    warm_done: u64,
+    done: u64,
+}
+
+fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {
+    // Distinct, reproducible streams per (seed, phase, iteration).
+    ChaCha8Rng::seed_from_u64(
+        seed ^ phase.wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            ^ iteration.wrapping_mul(0xbf58_476d_1ce4_e5b9),
+    )
+}
+
+impl Trainer {
+    /// Prepares a run: checks the data, builds the constant loss data (Laplacian, geodesic
+    /// penalty, rigid mask) and initialises the model from `config.seed`. `static_weights`
+    /// selects the baseline, whose logits start at `ln(w_init + 0.01)`.
+    pub fn new(
+        data: TrainData,
+        config: TrainConfig,
+        static_weights: bool,
+    ) -> Result<Self, TrainError> {
+        config
+            .validate()
+            .map_err(|f| TrainError::Data(format!("config field `{f}` is invalid")))?;
+        let t = &data.template;
+        t.validate()
+            .map_err(|e| TrainError::Data(format!("template: {e}")))?;
+        let (v, j) = (t.vertex_count(), data.skeleton.len());
+        if data.init_weights.len() != v * j {
+            return Err(TrainError::Data(format!(
+                "init_weights has {} entries, expected {v} × {j}",
+                data.init_weights.len()
+            )));
+        }
+        if data.frames.is_empty() {
+            return Err(TrainError::Data("no training frames".into()));
+        }
+        for (i, f) in data.frames.iter().enumerate() {
+            if f.skinning.len() != j || f.pose_features.len() != 3 * j {
+                return Err(TrainError::Data(format!(
+                    "frame {i}: skinning/pose_features sized for another skeleton"
+                )));
+            }
+        }
+        let dev = Device::Cpu;
+        let bounds = t
+            .bounds()
+            .ok_or_else(|| TrainError::Data("template has no bounds".into()))?;
+        let (lo, hi) = (bounds.min, bounds.max);
+        // A margin so points slightly outside the template (other resolutions) stay in [−1, 1].
+        let pad = (hi - lo).max_element() * 0.05;
+        let mc = ModelConfig::vinecs(j as u32, (lo - pad).to_array(), (hi + pad).to_array());
+        let varmap = VarMap::new();
+        let model = if static_weights {
+            // ε = 0.01 keeps zero weights within ~5 logit units: with ε = 1e-4 (−9.2) Adam's
+            // lr-sized steps needed hundreds of iterations before a zero weight could grow.
+            let logits: Vec<f32> = data.init_weights.iter().map(|w| (w + 1e-2).ln()).collect();
+            let var = Var::from_tensor(&Tensor::from_vec(logits, (v, j), &dev)?)?;
+            varmap
+                .data()
+                .lock()
+                .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?
+                .insert("static.logits".into(), var.clone());
+            Model::Static { logits: var }
+        } else {
+            SkinNet::init_varmap(
+                &varmap,
+                &mc,
+                PREFIX,
+                config.seed,
+                config.output_init_scale,
+                &dev,
+            )?;
+            let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
+            Model::Net {
+                net: SkinNet::new(&vb.pp(PREFIX), mc)?,
+                encoded: encode_positions(&mc, &t.positions, &dev)?,
+            }
+        };
+        let graph = MeshGraph::new(&t.positions, &t.triangles);
+        let skinning = GeodesicSkinningReg::new(
+            &graph,
+            &data.init_weights,
+            j,
+            config.skinning_r,
+            config.exact_diameter_limit,
+            &dev,
+        )?;
+        let partwise = PartwiseReg::new(
+            &data.init_weights,
+            j,
+            t.part_labels.as_deref(),
+            config.partwise_u,
+            &dev,
+        )?;
+        let laplacian = UniformLaplacian::new(&t.positions, &t.triangles, &dev)?;
+        let rest = rest_homogeneous(&t.positions, &dev)?;
+        let optimiser = Adam::from_varmap(&varmap, config.adam)?;
+        Ok(Self {
+            config,
+            data,
+            model,
+            varmap,
+            optimiser,
+            rest,
+            laplacian,
+            skinning,
+            partwise,
+            warm_done: 0,
+            done: 0,
+        })
+    }
+
+    /// The network (`None` for the static baseline).
+    #[must_use]
+    pub fn net(&self) -> Option<&SkinNet> {
+        match &self.model {
+            Model::Net { net, .. } => Some(net),
+            Model::Static { .. } => None,
+        }
+    }
+
+    /// The static baseline's weights `[V, J]` (`None` for SkinNet).
+    pub fn static_weights(&self) -> Result<Option<Vec<f32>>, TrainError> {
+        match &self.model {
+            Model::Static { logits } => Ok(Some(
+                softmax_last(logits.as_tensor())?.flatten_all()?.to_vec1()?,
+            )),
+            Model::Net { .. } => Ok(None),
+        }
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    /// `(warm-start iterations done, image iterations done)`.
+    #[must_use]
+    pub fn progress(&self) -> (u64, u64) {
+        (self.warm_done, self.done)
+    }
+
+    /// Weights `[B, V, J]` for the given frames.
+    pub fn weights(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
+        let j = self.data.skeleton.len();
+        Ok(match &self.model {
+            Model::Net { net, encoded } => {
+                let poses: Vec<f32> = frames
+                    .iter()
+                    .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
+                    .collect();
+                net.forward(
+                    encoded,
+                    &Tensor::from_vec(poses, (frames.len(), 3 * j), &Device::Cpu)?,
+                )?
+            }
+            Model::Static { logits } => {
+                let w = softmax_last(logits.as_tensor())?;
+                let (v, _) = w.dims2()?;
+                w.unsqueeze(0)?
+                    .broadcast_as((frames.len(), v, j))?
+                    .contiguous()?
+            }
+        })
+    }
+
+    fn sample(&self, phase: u64, iteration: u64) -> Vec<usize> {
+        let mut rng = frame_rng(self.config.seed, phase, iteration);
+        let n = self.data.frames.len();
+        (0..self.config.batch)
+            .map(|_| rng.random_range(0..n))
+            .collect()
+    }
+
+    /// One warm-start iteration: mean squared error to the initial weights on a random batch of
+    /// frames. Returns the loss before the step. A no-op for the static baseline.
+    pub fn warm_step(&mut self) -> Result<f64, TrainError> {
+        if matches!(self.model, Model::Static { .. }) {
+            self.warm_done += 1;
+            return Ok(0.0);
+        }
+        let frames = self.sample(1, self.warm_done);
+        let w = self.weights(&frames)?;
+        let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
+        let init = Tensor::from_vec(self.data.init_weights.clone(), (1, v, j), &Device::Cpu)?;
+        let loss = w.broadcast_sub(&init)?.sqr()?.mean_all()?;
+        let value = f64::from(loss.to_vec0::<f32>()?);
+        self.optimiser.backward_step(&loss)?;
+        self.warm_done += 1;
+        Ok(value)
+    }
+
+    /// One image-loss iteration on a seeded batch; returns its losses (before the step).
+    pub fn step(&mut self) -> Result<LossRecord, TrainError> {
+        let frames = self.sample(2, self.done);
+        let w = self.weights(&frames)?;
+        let b = frames.len();
+        let mats: Vec<Vec<Mat4>> = frames
+            .iter()
+            .map(|&f| self.data.frames[f].skinning.clone())
+            .collect();
+        let posed = lbs(&w, &skinning_tensor(&mats, &Device::Cpu)?, &self.rest)?;
+        let posed_values = posed.to_vec3::<f32>()?;
+        let mut boundary = Vec::new();
+        let mut contour = Vec::new();
+        for (k, &f) in frames.iter().enumerate() {
+            let xk = posed.get(k)?;
+            let pts: Vec<glam::Vec3> = posed_values[k]
+                .iter()
+                .map(|p| glam::Vec3::new(p[0], p[1], p[2]))
+                .collect();
+            for view in &self.data.frames[f].views {
+                let uv = project(&view.camera, &xk)?;
+                let valid = in_front(&view.camera, &pts);
+                let t = silhouette_terms(&view.target, &uv, &valid, &self.data.template.triangles)?;
+                boundary.push((t.boundary / t.boundary_count.max(1) as f64)?);
+                contour.push((t.contour / t.contour_count.max(1) as f64)?);
+            }
+        }
+        let mean = |ts: Vec<Tensor>| -> Result<Tensor, TrainError> {
+            let n = ts.len().max(1) as f64;
+            Ok(if ts.is_empty() {
+                Tensor::zeros((), DType::F32, &Device::Cpu)?
+            } else {
+                (Tensor::stack(&ts, 0)?.sum_all()? / n)?
+            })
+        };
+        let sb = mean(boundary)?;
+        let sc = mean(contour)?;
+        let v = self.data.template.vertex_count() as f64;
+        let lap = (self.laplacian.loss(&posed)? / (b as f64 * v))?;
+        let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
+        let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
+        let lw = self.config.weights;
+        let terms = [
+            (&sb * lw.silhouette_boundary)?,
+            (&sc * lw.silhouette_contour)?,
+            (&lap * lw.laplacian)?,
+            (&skin * lw.skinning)?,
+            (&part * lw.partwise)?,
+        ];
+        let total = Tensor::stack(&terms, 0)?.sum_all()?;
+        let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
+        self.done += 1;
+        let record = LossRecord {
+            iteration: self.done,
+            total: val(&total)?,
+            silhouette_boundary: val(&sb)?,
+            silhouette_contour: val(&sc)?,
+            laplacian: val(&lap)?,
+            skinning: val(&skin)?,
+            partwise: val(&part)?,
+        };
+        self.optimiser.backward_step(&total)?;
+        Ok(record)
+    }
+
+    /// Writes parameters, optimiser state and progress to `path` (safetensors, atomically).
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), TrainError> {
+        let mut tensors: HashMap<String, Tensor> = self.optimiser.state_tensors()?;
+        let vars = self
+            .varmap
+            .data()
+            .lock()
+            .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
+        for (k, v) in vars.iter() {
+            tensors.insert(format!("param.{k}"), v.as_tensor().clone());
+        }
+        let p = [self.warm_done, self.done]
+            .map(|x| [(x & 0xffff_ffff) as u32, (x >> 32) as u32])
+            .concat();
+        tensors.insert("progress".into(), Tensor::new(p.as_slice(), &Device::Cpu)?);
+        let tmp = path.with_extension("tmp");
+        candle_core::safetensors::save(&tensors, &tmp)?;
+        std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
+            path: path.to_owned(),
+            source,
+        })
+    }
+
+    /// Restores a checkpoint written by [`Trainer::save_checkpoint`] for the same data, config
+    /// and model kind; training then continues exactly where it stopped.
+    pub fn resume(&mut self, path: &Path) -> Result<(), TrainError> {
+        let bad = |reason: String| TrainError::Checkpoint {
+            path: path.to_owned(),
+            reason,
+        };
+        let tensors =
+            candle_core::safetensors::load(path, &Device::Cpu).map_err(|e| bad(e.to_string()))?;
+        {
+            let vars = self
+                .varmap
+                .data()
+                .lock()
+                .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
+            for (k, v) in vars.iter() {
+                let t = tensors
+                    .get(&format!("param.{k}"))
+                    .ok_or_else(|| bad(format!("parameter `{k}` is missing")))?;
+                if t.shape() != v.shape() {
+                    return Err(bad(format!(
+                        "parameter `{k}` has shape {:?}, expected {:?}",
+                        t.dims(),
+                        v.dims()
+                    )));
+                }
+                v.set(t)?;
+            }
+        }
+        self.optimiser
+            .load_state_tensors(&tensors)
+            .map_err(|e| bad(e.to_string()))?;
+        let p = tensors
+            .get("progress")
+            .ok_or_else(|| bad("`progress` is missing".into()))?
+            .to_vec1::<u32>()?;
+        if p.len() != 4 {
+            return Err(bad("`progress` has the wrong length".into()));
+        }
+        self.warm_done = u64::from(p[0]) | (u64::from(p[1]) << 32);
+        self.done = u64::from(p[2]) | (u64::from(p[3]) << 32);
+        Ok(())
+    }
+
+    /// Runs the remaining warm-start and image iterations, appending to `dir/losses.csv` and
+    /// writing `dir/checkpoint.safetensors` every `checkpoint_every` iterations and at the end.
+    /// Shows an indicatif progress bar with the current losses when `progress` is set.
+    pub fn run(&mut self, dir: &Path, progress: bool) -> Result<(), TrainError> {
+        let io = |path: &Path| {
+            let path = path.to_owned();
+            move |source: std::io::Error| TrainError::Io {
+                path: path.clone(),
+                source,
+            }
+        };
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        let csv_path = dir.join("losses.csv");
+        // Keep the rows up to the checkpoint (a crash may have logged iterations after it).
+        let mut kept = vec![LossRecord::CSV_HEADER.to_string()];
+        if self.done > 0 {
+            if let Ok(text) = std::fs::read_to_string(&csv_path) {
+                kept.extend(
+                    text.lines()
+                        .skip(1)
+                        .filter(|l| {
+                            l.split(',')
+                                .next()
+                                .and_then(|i| i.parse::<u64>().ok())
+                                .is_some_and(|i| i <= self.done)
+                        })
+                        .map(str::to_string),
+                );
+            }
+        }
+        let mut csv = std::fs::File::create(&csv_path).map_err(io(&csv_path))?;
+        writeln!(csv, "{}", kept.join("\n")).map_err(io(&csv_path))?;
+        let total = self.config.warm_start_iterations + self.config.iterations;
+        let bar = if progress {
+            indicatif::ProgressBar::new(total)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} {elapsed_precise} eta {eta} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar.set_position(self.warm_done + self.done);
+        let ckpt = dir.join("checkpoint.safetensors");
+        while self.warm_done < self.config.warm_start_iterations {
+            let l = self.warm_step()?;
+            bar.set_message(format!("warm start mse {l:.3e}"));
+            bar.inc(1);
+        }
+        while self.done < self.config.iterations {
+            let r = self.step()?;
+            writeln!(csv, "{}", r.csv_row()).map_err(io(&csv_path))?;
+            bar.set_message(format!(
+                "total {:.3} sil {:.2}/{:.2}px lap {:.2e} skin {:.2e} part {:.2e}",
+                r.total,
+                r.silhouette_boundary,
+                r.silhouette_contour,
+                r.laplacian,
+                r.skinning,
+                r.partwise
+            ));
+            bar.inc(1);
+            if self.config.checkpoint_every > 0
+                && self.done.is_multiple_of(self.config.checkpoint_every)
+            {
+                csv.flush().map_err(io(&csv_path))?;
+                self.save_checkpoint(&ckpt)?;
+            }
+        }
+        csv.flush().map_err(io(&csv_path))?;
+        self.save_checkpoint(&ckpt)?;
+        bar.finish();
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;
