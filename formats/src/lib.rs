@@ -14,6 +14,8 @@ extern crate alloc;
 
 pub mod camera;
 pub mod math;
+#[cfg(feature = "std")]
+pub mod makehuman;
 pub mod mesh;
 pub mod pose;
 pub mod skeleton;
