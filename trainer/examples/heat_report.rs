@@ -8,12 +8,15 @@
 //! the artist weights, and the mean vertex distance (cm) between LBS with our weights and LBS with
 //! the artist's over 20 seeded random poses (every joint rotated by a rotation vector with
 //! components uniform in ±0.35 rad). A rigid nearest-segment skin is printed as a baseline.
+//! Then the same for the glTF humanoids (CesiumMan, Witch, Female_Peasant; largest skin, glTF
+//! convention), the LBS distance over every clip of the file sampled at 10 instants each.
 
 use std::collections::HashMap;
 
 use glam::{Mat4, Quat, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use skinfield_formats::gltf_io::load_gltf;
 use skinfield_formats::makehuman::{MakeHumanOptions, load_makehuman_dir};
 use skinfield_formats::shared_data::shared_data_dir;
 use skinfield_formats::{Skeleton, Template};
@@ -58,6 +61,43 @@ fn main() -> anyhow::Result<()> {
             asset.skeleton.len(),
             l1(&rigid, art, asset.skeleton.len()),
             lbs_distance_cm(mesh, &asset.skeleton, &poses, &rigid, art),
+        );
+    }
+    for file in ["khronos-cesiumman/CesiumMan.glb", "quaternius-witch/Witch.gltf", "quaternius-female-peasant/Female_Peasant.gltf"] {
+        let doc = load_gltf(&dir.join("..").join(file))?;
+        let Some(skin) = doc.largest_skin() else { continue };
+        let mut results: Vec<HeatResult> =
+            (0..runs).map(|_| bone_heat(&skin.template, &skin.skeleton, &HeatOptions::default())).collect::<Result<_, _>>()?;
+        results.sort_by(|a, b| a.stats.total_s.total_cmp(&b.stats.total_s));
+        let r = &results[runs / 2];
+        let s = &r.stats;
+        let poses: Vec<Vec<Mat4>> = doc
+            .clips
+            .iter()
+            .flat_map(|c| (0..10).map(move |k| c.duration_s * k as f32 / 9.0).map(move |t| c.sample(skin, t)))
+            .map(|pose| {
+                let mut m = vec![Mat4::IDENTITY; skin.skeleton.len()];
+                skin.skeleton.skinning_matrices(&pose, &mut m).expect("pose");
+                m
+            })
+            .collect();
+        let (ours, art) = (r.skin.to_dense(), skin.skin.to_dense());
+        println!(
+            "| {file} ({} welded, {} clips) | {} | {} | to child (glTF) | {:.3} | {:.3} / {:.3} / {:.3} / {:.3} | {} comp of {}, {} vert | {:.3} | {:.2} |",
+            s.welded_vertices,
+            doc.clips.len(),
+            skin.template.vertex_count(),
+            skin.skeleton.len(),
+            s.total_s,
+            s.setup_s,
+            s.attach_s,
+            s.factor_s,
+            s.solve_s,
+            s.fallback_components,
+            s.components,
+            s.fallback_vertices,
+            l1(&ours, &art, skin.skeleton.len()),
+            if poses.is_empty() { f64::NAN } else { lbs_distance_cm(&skin.template, &skin.skeleton, &poses, &ours, &art) },
         );
     }
     Ok(())

@@ -20,6 +20,8 @@ enum Command {
     Version,
     /// Describe a glTF/GLB or .skf file as one JSON object.
     Inspect(cli::inspect::Args),
+    /// Bone-heat (Pinocchio) skinning weights for a glTF character, written back as glTF.
+    Heat(cli::heat::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -31,6 +33,7 @@ fn main() {
             Ok(())
         }
         Command::Inspect(args) => cli::inspect::run(args),
+        Command::Heat(args) => cli::heat::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -3,7 +3,7 @@
 //!
 //! For every joint `j`, solve `(−Δ + H) w_j = H p_j` on the template in its bind pose:
 //! - `Δ` is the cotangent Laplace–Beltrami operator normalised by mixed Voronoi areas,
-//!   `Δ = −M⁻¹K` (exact discretisation in [`laplacian`](self) — module `laplacian`); the system
+//!   `Δ = −M⁻¹K` (the exact discretisation is documented in module `laplacian`); the system
 //!   is solved in the equivalent symmetric form `(K + MH) w_j = MH p_j`;
 //! - `H_ii = c / d_i²` with `d_i` the distance from vertex `i` to its nearest *visible* bone
 //!   segment (module `attach`), `p_ij` the share of joint `j` among the visible segments tied
@@ -43,8 +43,6 @@ use std::time::Instant;
 use faer::Mat;
 use glam::{DVec3, Vec3};
 use skinfield_formats::{MeshError, Skeleton, SkinError, StaticSkin, Template};
-
-pub use bones::BoneSegment;
 
 use attach::{AttachParams, Attachment};
 
