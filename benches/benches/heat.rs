@@ -15,11 +15,15 @@ use skinfield_trainer::heat::{HeatOptions, bone_heat};
 
 fn bench(c: &mut Criterion) {
     let Some(dir) = shared_data_dir() else { return };
-    let asset = load_makehuman_dir(&dir.join("makehuman-hm08"), &MakeHumanOptions::default()).expect("MakeHuman body");
+    let asset = load_makehuman_dir(&dir.join("makehuman-hm08"), &MakeHumanOptions::default())
+        .expect("MakeHuman body");
     faer::set_global_parallelism(faer::Par::Seq);
     let mut group = c.benchmark_group("heat");
     group.sample_size(10);
-    let options = HeatOptions { bone_tails: Some(asset.bone_tails.clone()), ..Default::default() };
+    let options = HeatOptions {
+        bone_tails: Some(asset.bone_tails.clone()),
+        ..Default::default()
+    };
     group.bench_function("bone_heat/makehuman_body", |b| {
         b.iter(|| bone_heat(&asset.template, &asset.skeleton, &options).expect("heat"));
     });
@@ -34,7 +38,12 @@ fn bench(c: &mut Criterion) {
             degree[j] += 0.5;
         }
     }
-    triplets.extend(degree.iter().enumerate().map(|(i, &d)| Triplet::new(i, i, d)));
+    triplets.extend(
+        degree
+            .iter()
+            .enumerate()
+            .map(|(i, &d)| Triplet::new(i, i, d)),
+    );
     let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).expect("matrix");
     let joints = asset.skeleton.len();
     group.bench_function("reference_cholesky_163_solves/makehuman_body", |b| {

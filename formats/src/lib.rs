@@ -15,9 +15,9 @@ extern crate alloc;
 pub mod camera;
 #[cfg(feature = "std")]
 pub mod gltf_io;
-pub mod math;
 #[cfg(feature = "std")]
 pub mod makehuman;
+pub mod math;
 pub mod mesh;
 pub mod pose;
 pub mod skeleton;

@@ -45,21 +45,31 @@ fn cylinder(base: Vec3) -> Template {
         triangles.push([bottom, v(0, i), v(0, i + 1)]);
         triangles.push([top, v(RINGS - 1, i + 1), v(RINGS - 1, i)]);
     }
-    let mut t = Template { positions, triangles, ..Default::default() };
+    let mut t = Template {
+        positions,
+        triangles,
+        ..Default::default()
+    };
     t.compute_normals();
     t
 }
 
 /// root at `base` → knee at `base + (0, 1, 0)`; the knee is a leaf continuing for 1 (to y = 2).
-fn two_bones(base: Vec3, names: [&str; 2]) -> (Vec<String>, Vec<Option<usize>>, Vec<Transform>) {
+/// Joint names, parents and bind locals of one chain.
+type Chain = (Vec<String>, Vec<Option<usize>>, Vec<Transform>);
+
+fn two_bones(base: Vec3, names: [&str; 2]) -> Chain {
     (
         names.map(String::from).to_vec(),
         vec![None, Some(0)],
-        vec![Transform::from_translation(base), Transform::from_translation(Vec3::Y)],
+        vec![
+            Transform::from_translation(base),
+            Transform::from_translation(Vec3::Y),
+        ],
     )
 }
 
-fn skeleton(parts: Vec<(Vec<String>, Vec<Option<usize>>, Vec<Transform>)>) -> Skeleton {
+fn skeleton(parts: Vec<Chain>) -> Skeleton {
     let (mut names, mut parents, mut locals) = (Vec::new(), Vec::new(), Vec::new());
     for (n, p, l) in parts {
         let off = names.len();
@@ -71,12 +81,18 @@ fn skeleton(parts: Vec<(Vec<String>, Vec<Option<usize>>, Vec<Transform>)>) -> Sk
 }
 
 fn options() -> HeatOptions {
-    HeatOptions { leaf_fraction: 1.0, ..Default::default() }
+    HeatOptions {
+        leaf_fraction: 1.0,
+        ..Default::default()
+    }
 }
 
 fn weight(skin: &StaticSkin, v: usize, j: u32) -> f32 {
     let (js, ws) = skin.influences(v);
-    js.iter().zip(ws).find(|(a, _)| **a == j).map_or(0.0, |(_, w)| *w)
+    js.iter()
+        .zip(ws)
+        .find(|(a, _)| **a == j)
+        .map_or(0.0, |(_, w)| *w)
 }
 
 fn assert_valid(skin: &StaticSkin, vertices: usize) {
@@ -84,8 +100,14 @@ fn assert_valid(skin: &StaticSkin, vertices: usize) {
     for v in 0..vertices {
         let (_, ws) = skin.influences(v);
         assert!(!ws.is_empty(), "vertex {v} has no weight");
-        assert!(ws.iter().all(|w| w.is_finite() && *w >= 0.0), "vertex {v}: {ws:?}");
-        assert!((ws.iter().sum::<f32>() - 1.0).abs() < 1e-5, "vertex {v}: {ws:?}");
+        assert!(
+            ws.iter().all(|w| w.is_finite() && *w >= 0.0),
+            "vertex {v}: {ws:?}"
+        );
+        assert!(
+            (ws.iter().sum::<f32>() - 1.0).abs() < 1e-5,
+            "vertex {v}: {ws:?}"
+        );
     }
 }
 
@@ -95,10 +117,21 @@ fn two_bone_cylinder_is_monotone_symmetric_and_solid_mid_bone() {
     let skel = skeleton(vec![two_bones(Vec3::ZERO, ["root", "knee"])]);
     let r = bone_heat(&mesh, &skel, &options()).unwrap();
     assert_valid(&r.skin, mesh.vertex_count());
-    assert_eq!((r.stats.components, r.stats.fallback_components, r.stats.fallback_vertices), (1, 0, 0));
+    assert_eq!(
+        (
+            r.stats.components,
+            r.stats.fallback_components,
+            r.stats.fallback_vertices
+        ),
+        (1, 0, 0)
+    );
     // Before clamping, Σ_j w_j solves the same system with right-hand side M H · 1, whose
     // solution is exactly 1: the raw weights are a partition of unity up to solver round-off.
-    assert!(r.stats.raw_sum_deviation < 1e-8, "{}", r.stats.raw_sum_deviation);
+    assert!(
+        r.stats.raw_sum_deviation < 1e-8,
+        "{}",
+        r.stats.raw_sum_deviation
+    );
     // Heat undershoots zero only slightly (negative cotangents exist only on the caps).
     assert!(r.stats.raw_min > -1e-3, "{}", r.stats.raw_min);
     let knee = |v: usize| weight(&r.skin, v, 1);
@@ -107,16 +140,30 @@ fn two_bone_cylinder_is_monotone_symmetric_and_solid_mid_bone() {
             let v = k * SIDES + i;
             // Monotone along the axis.
             if k + 1 < RINGS {
-                assert!(knee(v + SIDES) >= knee(v) - 1e-6, "ring {k} side {i}: {} then {}", knee(v), knee(v + SIDES));
+                assert!(
+                    knee(v + SIDES) >= knee(v) - 1e-6,
+                    "ring {k} side {i}: {} then {}",
+                    knee(v),
+                    knee(v + SIDES)
+                );
             }
             // Mirror symmetry about the joint: w_knee(y) = w_root(2 − y) = 1 − w_knee(2 − y).
             let mirror = (RINGS - 1 - k) * SIDES + i;
-            assert!((knee(v) - (1.0 - knee(mirror))).abs() < 1e-4, "ring {k}: {} vs {}", knee(v), knee(mirror));
+            assert!(
+                (knee(v) - (1.0 - knee(mirror))).abs() < 1e-4,
+                "ring {k}: {} vs {}",
+                knee(v),
+                knee(mirror)
+            );
         }
         // Half-way along each bone (y = 0.5, 1.5; 5 radii from the joint) a vertex is ~fully bound.
         assert!(knee(10 * SIDES + i) < 0.01 && knee(30 * SIDES + i) > 0.99);
         // At the joint the two bones split the vertex evenly (by the symmetry).
-        assert!((knee(20 * SIDES + i) - 0.5).abs() < 1e-3, "{}", knee(20 * SIDES + i));
+        assert!(
+            (knee(20 * SIDES + i) - 0.5).abs() < 1e-3,
+            "{}",
+            knee(20 * SIDES + i)
+        );
     }
     // The transition really happens: some ring is neither fully one nor the other.
     assert!((0..mesh.vertex_count()).any(|v| (0.2..0.8).contains(&knee(v)) && v != 20 * SIDES));
@@ -139,7 +186,11 @@ fn uniform_scale_of_mesh_and_skeleton_leaves_weights_unchanged() {
     let big_skel = skeleton(vec![(names, parents, locals)]);
     let rb = bone_heat(&big, &big_skel, &options()).unwrap();
     let (a, b) = (r.skin.to_dense(), rb.skin.to_dense());
-    let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
     assert!(worst < 1e-4, "{worst}");
 }
 
@@ -166,7 +217,10 @@ fn unwelded_input_gives_the_welded_weights_on_every_copy() {
     assert_valid(&r.skin, soup.vertex_count());
     for (v, &s) in source.iter().enumerate() {
         for j in 0..2 {
-            assert!((weight(&r.skin, v, j) - weight(&welded, s, j)).abs() < 1e-5, "copy {v} of {s}");
+            assert!(
+                (weight(&r.skin, v, j) - weight(&welded, s, j)).abs() < 1e-5,
+                "copy {v} of {s}"
+            );
         }
     }
 }
@@ -178,7 +232,8 @@ fn each_component_takes_heat_from_the_bones_it_sees() {
     let other = cylinder(Vec3::new(1.0, 0.0, 0.0));
     let off = mesh.positions.len() as u32;
     mesh.positions.extend(&other.positions);
-    mesh.triangles.extend(other.triangles.iter().map(|t| t.map(|v| v + off)));
+    mesh.triangles
+        .extend(other.triangles.iter().map(|t| t.map(|v| v + off)));
     let box_first = mesh.positions.len();
     let c = Vec3::new(4.0, 1.0, 0.0);
     for z in [-0.2f32, 0.2] {
@@ -189,13 +244,23 @@ fn each_component_takes_heat_from_the_bones_it_sees() {
         }
     }
     let b = box_first as u32;
-    let faces = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let faces = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
     for f in faces {
         mesh.triangles.push([b + f[0], b + f[1], b + f[2]]);
         mesh.triangles.push([b + f[0], b + f[2], b + f[3]]);
     }
     mesh.compute_normals();
-    let skel = skeleton(vec![two_bones(Vec3::ZERO, ["a0", "a1"]), two_bones(Vec3::new(1.0, 0.0, 0.0), ["b0", "b1"])]);
+    let skel = skeleton(vec![
+        two_bones(Vec3::ZERO, ["a0", "a1"]),
+        two_bones(Vec3::new(1.0, 0.0, 0.0), ["b0", "b1"]),
+    ]);
     let r = bone_heat(&mesh, &skel, &options()).unwrap();
     assert_valid(&r.skin, mesh.vertex_count());
     assert_eq!(r.stats.components, 3);
@@ -213,7 +278,12 @@ fn each_component_takes_heat_from_the_bones_it_sees() {
         assert!(r.skin.influences(v).0.iter().all(|j| [2, 3].contains(j)));
     }
     // And limb a is unaffected by the rest: the same weights as alone.
-    let alone = bone_heat(&cylinder(Vec3::ZERO), &skeleton(vec![two_bones(Vec3::ZERO, ["a0", "a1"])]), &options()).unwrap();
+    let alone = bone_heat(
+        &cylinder(Vec3::ZERO),
+        &skeleton(vec![two_bones(Vec3::ZERO, ["a0", "a1"])]),
+        &options(),
+    )
+    .unwrap();
     for v in 0..off as usize {
         assert!((weight(&r.skin, v, 1) - weight(&alone.skin, v, 1)).abs() < 1e-5);
     }
@@ -226,7 +296,11 @@ fn degenerate_duplicate_interior_and_isolated_geometry_do_not_break_it() {
     // A zero-area sliver (three collinear points), a duplicate triangle in the other orientation,
     // an isolated vertex, and an interior disk at y = 0.5 whose rim is welded onto the wall
     // (non-manifold edges).
-    mesh.positions.extend([Vec3::new(0.0, 0.3, 0.0), Vec3::new(0.0, 0.4, 0.0), Vec3::new(0.0, 0.5, 0.0)]);
+    mesh.positions.extend([
+        Vec3::new(0.0, 0.3, 0.0),
+        Vec3::new(0.0, 0.4, 0.0),
+        Vec3::new(0.0, 0.5, 0.0),
+    ]);
     mesh.triangles.push([n, n + 1, n + 2]);
     let t0 = mesh.triangles[0];
     mesh.triangles.push([t0[0], t0[2], t0[1]]);
@@ -239,7 +313,8 @@ fn degenerate_duplicate_interior_and_isolated_geometry_do_not_break_it() {
         mesh.positions.push(mesh.positions[10 * SIDES + i]);
     }
     for i in 0..SIDES as u32 {
-        mesh.triangles.push([centre, rim_first + i, rim_first + (i + 1) % SIDES as u32]);
+        mesh.triangles
+            .push([centre, rim_first + i, rim_first + (i + 1) % SIDES as u32]);
     }
     mesh.compute_normals();
     let skel = skeleton(vec![two_bones(Vec3::ZERO, ["root", "knee"])]);
@@ -259,6 +334,26 @@ fn bad_input_is_an_error() {
     mesh.positions[3].x = f32::NAN;
     assert!(bone_heat(&mesh, &skel, &options()).is_err());
     let mesh = cylinder(Vec3::ZERO);
-    assert!(bone_heat(&mesh, &skel, &HeatOptions { bone_tails: Some(vec![Vec3::ZERO]), ..options() }).is_err());
-    assert!(bone_heat(&mesh, &skel, &HeatOptions { cone_cos: 2.0, ..options() }).is_err());
+    assert!(
+        bone_heat(
+            &mesh,
+            &skel,
+            &HeatOptions {
+                bone_tails: Some(vec![Vec3::ZERO]),
+                ..options()
+            }
+        )
+        .is_err()
+    );
+    assert!(
+        bone_heat(
+            &mesh,
+            &skel,
+            &HeatOptions {
+                cone_cos: 2.0,
+                ..options()
+            }
+        )
+        .is_err()
+    );
 }

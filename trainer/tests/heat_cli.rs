@@ -22,11 +22,17 @@ fn reweights_cesiumman_and_writes_gltf_and_json() {
         .arg(&json)
         .output()
         .unwrap();
-    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    assert!(
+        status.status.success(),
+        "{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
 
     let source = load_gltf(&asset).unwrap();
     let skin = source.largest_skin().unwrap();
-    let expected = bone_heat(&skin.template, &skin.skeleton, &HeatOptions::default()).unwrap().skin;
+    let expected = bone_heat(&skin.template, &skin.skeleton, &HeatOptions::default())
+        .unwrap()
+        .skin;
     let written = load_gltf(&out).unwrap();
     let back = written.largest_skin().unwrap();
     assert_eq!(back.template.vertex_count(), skin.template.vertex_count());
@@ -35,13 +41,22 @@ fn reweights_cesiumman_and_writes_gltf_and_json() {
     let n = skin.template.vertex_count();
     let dominant = |s: &skinfield_formats::StaticSkin, v: usize| {
         let (j, w) = s.influences(v);
-        j.iter().zip(w).max_by(|a, b| a.1.total_cmp(b.1)).map(|(j, _)| *j).unwrap()
+        j.iter()
+            .zip(w)
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(j, _)| *j)
+            .unwrap()
     };
-    let same = (0..n).filter(|&v| dominant(&back.skin, v) == dominant(&expected, v)).count();
+    let same = (0..n)
+        .filter(|&v| dominant(&back.skin, v) == dominant(&expected, v))
+        .count();
     assert!(same * 100 >= n * 99, "{same} of {n}");
 
     let value: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    assert_eq!(value["joints"].as_array().unwrap().len(), skin.skeleton.len());
+    assert_eq!(
+        value["joints"].as_array().unwrap().len(),
+        skin.skeleton.len()
+    );
     let weights = value["weights"].as_array().unwrap();
     assert_eq!(weights.len(), n);
     for (v, row) in weights.iter().enumerate() {

@@ -32,7 +32,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .with_context(|| format!("{}: no skin to re-weight", args.asset.display()))?;
     let result = bone_heat(&skin.template, &skin.skeleton, &HeatOptions::default())
         .with_context(|| format!("{}: bone heat", args.asset.display()))?;
-    write_gltf_character(&args.out, &skin.skeleton, &skin.template, &result.skin, None)?;
+    write_gltf_character(
+        &args.out,
+        &skin.skeleton,
+        &skin.template,
+        &result.skin,
+        None,
+    )?;
     if let Some(path) = &args.json {
         let mut s = String::from("{\"joints\":");
         s.push_str(&serde_json::to_string(skin.skeleton.names())?);

@@ -43,7 +43,11 @@ pub(crate) struct AttachParams {
 /// Unit vertex normals as the normalised sum of incident unit face normals (zero where
 /// undefined). Only triangles flagged in `used` count.
 #[must_use]
-pub(crate) fn cone_normals(positions: &[DVec3], triangles: &[[u32; 3]], used: &[bool]) -> Vec<DVec3> {
+pub(crate) fn cone_normals(
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    used: &[bool],
+) -> Vec<DVec3> {
     let mut n = vec![DVec3::ZERO; positions.len()];
     for (t, &u) in triangles.iter().zip(used) {
         if !u {
@@ -89,7 +93,12 @@ fn attach_one(
     order: &mut Vec<(f64, usize)>,
 ) -> Attachment {
     order.clear();
-    order.extend(segments.iter().enumerate().map(|(s, seg)| (seg.closest_point(p).distance(p), s)));
+    order.extend(
+        segments
+            .iter()
+            .enumerate()
+            .map(|(s, seg)| (seg.closest_point(p).distance(p), s)),
+    );
     order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     let visible = |s: usize| -> bool {
         if params.ignore_visibility {
@@ -109,17 +118,19 @@ fn attach_one(
     let mut nearest: Option<f64> = None;
     let mut tied: Vec<u32> = Vec::new();
     for &(d, s) in order.iter() {
-        if let Some(d0) = nearest {
-            if d > d0.max(params.min_distance) * (1.0 + params.tie_tolerance) {
-                break;
-            }
+        if let Some(d0) = nearest
+            && d > d0.max(params.min_distance) * (1.0 + params.tie_tolerance)
+        {
+            break;
         }
         if visible(s) {
             nearest.get_or_insert(d);
             tied.push(segments[s].joint);
         }
     }
-    let Some(d) = nearest else { return Attachment::default() };
+    let Some(d) = nearest else {
+        return Attachment::default();
+    };
     tied.sort_unstable();
     let share = 1.0 / tied.len() as f64;
     let mut joints: Vec<(u32, f64)> = Vec::with_capacity(tied.len());
@@ -129,7 +140,10 @@ fn attach_one(
             _ => joints.push((j, share)),
         }
     }
-    Attachment { distance: d.max(params.min_distance), joints }
+    Attachment {
+        distance: d.max(params.min_distance),
+        joints,
+    }
 }
 
 #[cfg(test)]
@@ -137,7 +151,11 @@ mod tests {
     use super::*;
 
     fn seg(joint: u32, a: [f64; 3], b: [f64; 3]) -> BoneSegment {
-        BoneSegment { joint, a: DVec3::from_array(a), b: DVec3::from_array(b) }
+        BoneSegment {
+            joint,
+            a: DVec3::from_array(a),
+            b: DVec3::from_array(b),
+        }
     }
 
     #[test]
@@ -150,15 +168,25 @@ mod tests {
             DVec3::new(0.5, -5.0, 5.0),
         ];
         let bvh = Bvh::new(&wall, &[[0, 1, 2], [0, 2, 3]]);
-        let segs = [seg(0, [1.0, -1.0, 0.0], [1.0, 1.0, 0.0]), seg(1, [-1.5, -1.0, 0.0], [-1.5, 1.0, 0.0])];
-        let params = AttachParams { tie_tolerance: 1e-4, cone_cos: 0.5, ignore_visibility: false, min_distance: 1e-9 };
+        let segs = [
+            seg(0, [1.0, -1.0, 0.0], [1.0, 1.0, 0.0]),
+            seg(1, [-1.5, -1.0, 0.0], [-1.5, 1.0, 0.0]),
+        ];
+        let params = AttachParams {
+            tie_tolerance: 1e-4,
+            cone_cos: 0.5,
+            ignore_visibility: false,
+            min_distance: 1e-9,
+        };
         // The query vertex is index 4, after the wall's corners (the BVH skips triangles that
         // have the query vertex as a corner).
         let p = [wall[0], wall[1], wall[2], wall[3], DVec3::ZERO];
         let active = [false, false, false, false, true];
         let run = |normal: DVec3, params: AttachParams| {
             let normals = [DVec3::X, DVec3::X, DVec3::X, DVec3::X, normal];
-            attach(&p, &normals, &active, &segs, &bvh, params).pop().unwrap()
+            attach(&p, &normals, &active, &segs, &bvh, params)
+                .pop()
+                .unwrap()
         };
         // Normal +X: the direction from bone 0 to the vertex is -X, outside the cone; bone 1,
         // farther but along +X, is visible.
@@ -168,15 +196,48 @@ mod tests {
         // Normal -X: bone 0 passes the cone but the wall hides it; bone 1 fails the cone.
         assert!(run(DVec3::NEG_X, params).joints.is_empty());
         // Without the wall bone 0 is seen.
-        let no_wall = attach(&p[4..], &[DVec3::NEG_X], &[true], &segs, &Bvh::new(&[], &[]), params);
+        let no_wall = attach(
+            &p[4..],
+            &[DVec3::NEG_X],
+            &[true],
+            &segs,
+            &Bvh::new(&[], &[]),
+            params,
+        );
         assert_eq!(no_wall[0].joints, vec![(0, 1.0)]);
-        assert_eq!(run(DVec3::NEG_X, AttachParams { ignore_visibility: true, ..params }).joints, vec![(0, 1.0)]);
+        assert_eq!(
+            run(
+                DVec3::NEG_X,
+                AttachParams {
+                    ignore_visibility: true,
+                    ..params
+                }
+            )
+            .joints,
+            vec![(0, 1.0)]
+        );
         let p = [DVec3::ZERO];
         // Two bones at the same distance, both visible (no wall): they share.
         let empty = Bvh::new(&[], &[]);
-        let segs = [seg(3, [0.0, -1.0, -1.0], [0.0, 1.0, -1.0]), seg(5, [0.0, -1.0, 1.0], [0.0, 1.0, 1.0])];
-        let a = attach(&p, &[DVec3::Y], &[true], &segs, &empty, AttachParams { cone_cos: -1.0, ..params });
+        let segs = [
+            seg(3, [0.0, -1.0, -1.0], [0.0, 1.0, -1.0]),
+            seg(5, [0.0, -1.0, 1.0], [0.0, 1.0, 1.0]),
+        ];
+        let a = attach(
+            &p,
+            &[DVec3::Y],
+            &[true],
+            &segs,
+            &empty,
+            AttachParams {
+                cone_cos: -1.0,
+                ..params
+            },
+        );
         assert_eq!(a[0].joints, vec![(3, 0.5), (5, 0.5)]);
-        assert_eq!(attach(&p, &[DVec3::Y], &[false], &segs, &empty, params)[0], Attachment::default());
+        assert_eq!(
+            attach(&p, &[DVec3::Y], &[false], &segs, &empty, params)[0],
+            Attachment::default()
+        );
     }
 }

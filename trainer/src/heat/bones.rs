@@ -68,7 +68,16 @@ pub(crate) fn bone_segments(
     leaf_fraction: f64,
 ) -> Vec<BoneSegment> {
     if let Some(tails) = tails {
-        return heads.iter().zip(tails).enumerate().map(|(j, (&a, &b))| BoneSegment { joint: j as u32, a, b }).collect();
+        return heads
+            .iter()
+            .zip(tails)
+            .enumerate()
+            .map(|(j, (&a, &b))| BoneSegment {
+                joint: j as u32,
+                a,
+                b,
+            })
+            .collect();
     }
     let parents = skeleton.parents();
     let mut segments = Vec::with_capacity(heads.len() + 8);
@@ -77,7 +86,11 @@ pub(crate) fn bone_segments(
         let mut has_child = false;
         for c in skeleton.children(j) {
             has_child = true;
-            segments.push(BoneSegment { joint: j as u32, a, b: heads[c] });
+            segments.push(BoneSegment {
+                joint: j as u32,
+                a,
+                b: heads[c],
+            });
         }
         if has_child {
             continue;
@@ -86,7 +99,11 @@ pub(crate) fn bone_segments(
             Some(p) => a + (a - heads[p]) * leaf_fraction,
             None => a,
         };
-        segments.push(BoneSegment { joint: j as u32, a, b });
+        segments.push(BoneSegment {
+            joint: j as u32,
+            a,
+            b,
+        });
     }
     segments
 }
@@ -121,7 +138,13 @@ mod tests {
         // The leg is a leaf too: a segment continuing hips → leg.
         assert!((segs[3].b - (heads[2] + (heads[2] - heads[0]) * 0.5)).length() < 1e-9);
         let seg = segs[2];
-        assert!((seg.closest_point(DVec3::new(1.0, 1.7, 0.0)) - DVec3::new(0.0, 1.7, 0.0)).length() < 1e-9);
-        assert!((seg.closest_point(DVec3::new(1.0, 1.2, 0.0)) - DVec3::new(0.0, 1.5, 0.0)).length() < 1e-9);
+        assert!(
+            (seg.closest_point(DVec3::new(1.0, 1.7, 0.0)) - DVec3::new(0.0, 1.7, 0.0)).length()
+                < 1e-9
+        );
+        assert!(
+            (seg.closest_point(DVec3::new(1.0, 1.2, 0.0)) - DVec3::new(0.0, 1.5, 0.0)).length()
+                < 1e-9
+        );
     }
 }

@@ -30,11 +30,19 @@ impl Bvh {
     /// Builds the hierarchy over `triangles` (indices into `positions`).
     #[must_use]
     pub(crate) fn new(positions: &[DVec3], triangles: &[[u32; 3]]) -> Self {
-        let tris: Vec<[DVec3; 3]> = triangles.iter().map(|t| t.map(|v| positions[v as usize])).collect();
+        let tris: Vec<[DVec3; 3]> = triangles
+            .iter()
+            .map(|t| t.map(|v| positions[v as usize]))
+            .collect();
         let centroids: Vec<DVec3> = tris.iter().map(|t| (t[0] + t[1] + t[2]) / 3.0).collect();
         let mut order: Vec<u32> = (0..tris.len() as u32).collect();
         let mut nodes = Vec::with_capacity(2 * tris.len() / LEAF_SIZE + 1);
-        nodes.push(Node { min: DVec3::ZERO, max: DVec3::ZERO, first: 0, count: 0 });
+        nodes.push(Node {
+            min: DVec3::ZERO,
+            max: DVec3::ZERO,
+            first: 0,
+            count: 0,
+        });
         // Explicit stack of (node, start, end) keeps deep trees off the call stack.
         let mut stack = vec![(0usize, 0usize, tris.len())];
         while let Some((node, start, end)) = stack.pop() {
@@ -50,7 +58,12 @@ impl Bvh {
             }
             let extent = cmax - cmin;
             if end - start <= LEAF_SIZE || extent.max_element() <= 0.0 {
-                nodes[node] = Node { min, max, first: start as u32, count: (end - start) as u32 };
+                nodes[node] = Node {
+                    min,
+                    max,
+                    first: start as u32,
+                    count: (end - start) as u32,
+                };
                 continue;
             }
             let axis = if extent.x >= extent.y && extent.x >= extent.z {
@@ -65,13 +78,33 @@ impl Bvh {
                 centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
             });
             let left = nodes.len();
-            nodes.push(Node { min: DVec3::ZERO, max: DVec3::ZERO, first: 0, count: 0 });
-            nodes.push(Node { min: DVec3::ZERO, max: DVec3::ZERO, first: 0, count: 0 });
-            nodes[node] = Node { min, max, first: left as u32, count: 0 };
+            nodes.push(Node {
+                min: DVec3::ZERO,
+                max: DVec3::ZERO,
+                first: 0,
+                count: 0,
+            });
+            nodes.push(Node {
+                min: DVec3::ZERO,
+                max: DVec3::ZERO,
+                first: 0,
+                count: 0,
+            });
+            nodes[node] = Node {
+                min,
+                max,
+                first: left as u32,
+                count: 0,
+            };
             stack.push((left, start, mid));
             stack.push((left + 1, mid, end));
         }
-        Self { nodes, order, triangles: tris, corners: triangles.to_vec() }
+        Self {
+            nodes,
+            order,
+            triangles: tris,
+            corners: triangles.to_vec(),
+        }
     }
 
     /// Whether the segment `p → q` crosses a triangle at a parameter `t ∈ (t_min, 1]`, ignoring
@@ -96,10 +129,10 @@ impl Bvh {
                     if self.corners[t as usize].contains(&skip_vertex) {
                         continue;
                     }
-                    if let Some(s) = intersect(p, d, &self.triangles[t as usize]) {
-                        if s > t_min && s <= 1.0 {
-                            return true;
-                        }
+                    if intersect(p, d, &self.triangles[t as usize])
+                        .is_some_and(|s| s > t_min && s <= 1.0)
+                    {
+                        return true;
                     }
                 }
             } else if top + 2 <= stack.len() {
@@ -110,7 +143,8 @@ impl Bvh {
                 // Deeper than the fixed stack (median splits stay below depth 30 for any mesh
                 // we accept): answer the whole query by brute force rather than miss a hit.
                 return self.triangles.iter().zip(&self.corners).any(|(tri, c)| {
-                    !c.contains(&skip_vertex) && intersect(p, d, tri).is_some_and(|s| s > t_min && s <= 1.0)
+                    !c.contains(&skip_vertex)
+                        && intersect(p, d, tri).is_some_and(|s| s > t_min && s <= 1.0)
                 });
             }
         }
@@ -125,8 +159,14 @@ fn slab_hit(p: DVec3, inv: DVec3, min: DVec3, max: DVec3) -> bool {
     // NaN appears for 0·∞ (segment parallel to and on a slab plane): treat it as inside.
     let lo = t0.min(t1);
     let hi = t0.max(t1);
-    let enter = [lo.x, lo.y, lo.z, 0.0].into_iter().filter(|v| !v.is_nan()).fold(f64::NEG_INFINITY, f64::max);
-    let exit = [hi.x, hi.y, hi.z, 1.0].into_iter().filter(|v| !v.is_nan()).fold(f64::INFINITY, f64::min);
+    let enter = [lo.x, lo.y, lo.z, 0.0]
+        .into_iter()
+        .filter(|v| !v.is_nan())
+        .fold(f64::NEG_INFINITY, f64::max);
+    let exit = [hi.x, hi.y, hi.z, 1.0]
+        .into_iter()
+        .filter(|v| !v.is_nan())
+        .fold(f64::INFINITY, f64::min);
     enter <= exit
 }
 
@@ -163,12 +203,20 @@ mod tests {
     #[test]
     fn agrees_with_brute_force_on_random_soups() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
-        let mut r = || DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+        let mut r = || {
+            DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
         // Small triangles scattered in a cube, so that some segments hit and some miss.
-        let positions: Vec<DVec3> = (0..100).flat_map(|_| {
-            let c = r();
-            [c + r() * 0.2, c + r() * 0.2, c + r() * 0.2]
-        }).collect::<Vec<_>>();
+        let positions: Vec<DVec3> = (0..100)
+            .flat_map(|_| {
+                let c = r();
+                [c + r() * 0.2, c + r() * 0.2, c + r() * 0.2]
+            })
+            .collect::<Vec<_>>();
         let triangles: Vec<[u32; 3]> = (0..100).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
         let bvh = Bvh::new(&positions, &triangles);
         let mut hits = 0;
@@ -177,7 +225,8 @@ mod tests {
             let skip = (k % 300) as u32;
             let brute = triangles.iter().any(|t| {
                 !t.contains(&skip)
-                    && intersect(p, q - p, &t.map(|v| positions[v as usize])).is_some_and(|s| s > 1e-9 && s <= 1.0)
+                    && intersect(p, q - p, &t.map(|v| positions[v as usize]))
+                        .is_some_and(|s| s > 1e-9 && s <= 1.0)
             });
             assert_eq!(bvh.segment_hits(p, q, 1e-9, skip), brute, "query {k}");
             hits += usize::from(brute);
@@ -188,12 +237,37 @@ mod tests {
 
     #[test]
     fn axis_aligned_segment_through_a_square() {
-        let p = [DVec3::new(-1.0, 0.0, -1.0), DVec3::new(1.0, 0.0, -1.0), DVec3::new(1.0, 0.0, 1.0), DVec3::new(-1.0, 0.0, 1.0)];
+        let p = [
+            DVec3::new(-1.0, 0.0, -1.0),
+            DVec3::new(1.0, 0.0, -1.0),
+            DVec3::new(1.0, 0.0, 1.0),
+            DVec3::new(-1.0, 0.0, 1.0),
+        ];
         let bvh = Bvh::new(&p, &[[0, 1, 2], [0, 2, 3]]);
-        assert!(bvh.segment_hits(DVec3::new(0.3, 1.0, 0.2), DVec3::new(0.3, -1.0, 0.2), 1e-9, u32::MAX));
-        assert!(!bvh.segment_hits(DVec3::new(0.3, 1.0, 0.2), DVec3::new(0.3, 0.5, 0.2), 1e-9, u32::MAX));
-        assert!(!bvh.segment_hits(DVec3::new(3.0, 1.0, 0.2), DVec3::new(3.0, -1.0, 0.2), 1e-9, u32::MAX));
+        assert!(bvh.segment_hits(
+            DVec3::new(0.3, 1.0, 0.2),
+            DVec3::new(0.3, -1.0, 0.2),
+            1e-9,
+            u32::MAX
+        ));
+        assert!(!bvh.segment_hits(
+            DVec3::new(0.3, 1.0, 0.2),
+            DVec3::new(0.3, 0.5, 0.2),
+            1e-9,
+            u32::MAX
+        ));
+        assert!(!bvh.segment_hits(
+            DVec3::new(3.0, 1.0, 0.2),
+            DVec3::new(3.0, -1.0, 0.2),
+            1e-9,
+            u32::MAX
+        ));
         // Starting on the square and skipping its corner 0 still sees triangle [0, 1, 2]: skipped.
-        assert!(!bvh.segment_hits(DVec3::new(-0.5, 0.0, -0.6), DVec3::new(-0.5, -1.0, -0.6), 1e-9, 0));
+        assert!(!bvh.segment_hits(
+            DVec3::new(-0.5, 0.0, -0.6),
+            DVec3::new(-0.5, -1.0, -0.6),
+            1e-9,
+            0
+        ));
     }
 }

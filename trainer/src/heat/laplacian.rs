@@ -51,7 +51,7 @@ pub(crate) fn cotangent_stiffness(positions: &[DVec3], triangles: &[[u32; 3]]) -
         let l2 = e.map(|e| e.length_squared());
         let double_area = e[0].cross(e[1]).length();
         let longest = l2[0].max(l2[1]).max(l2[2]);
-        if !(double_area > DEGENERATE_RATIO * longest) {
+        if double_area.is_nan() || double_area <= DEGENERATE_RATIO * longest {
             continue;
         }
         used[t] = true;
@@ -114,7 +114,13 @@ mod tests {
         // Right angle at vertex 0: cot 0 there, cot 1 at the two 45° corners.
         let p = [DVec3::ZERO, DVec3::X, DVec3::Y];
         let s = cotangent_stiffness(&p, &[[0, 1, 2]]);
-        let w = |a: u32, b: u32| s.edges.iter().find(|e| (e.0, e.1) == (a.max(b), a.min(b))).unwrap().2;
+        let w = |a: u32, b: u32| {
+            s.edges
+                .iter()
+                .find(|e| (e.0, e.1) == (a.max(b), a.min(b)))
+                .unwrap()
+                .2
+        };
         assert!((w(1, 2) - 0.0).abs() < 1e-12);
         assert!((w(0, 1) - 0.5).abs() < 1e-12);
         assert!((w(0, 2) - 0.5).abs() < 1e-12);
@@ -133,7 +139,11 @@ mod tests {
         for y in 0..n {
             for x in 0..n {
                 let interior = x > 0 && y > 0 && x < n - 1 && y < n - 1;
-                let j = if interior { 0.3 * (((x * 7 + y * 3) % 5) as f64 / 4.0 - 0.5) } else { 0.0 };
+                let j = if interior {
+                    0.3 * (((x * 7 + y * 3) % 5) as f64 / 4.0 - 0.5)
+                } else {
+                    0.0
+                };
                 p.push(DVec3::new(x as f64 + j, y as f64 - j, 0.0));
             }
         }
@@ -147,7 +157,14 @@ mod tests {
             }
         }
         let s = cotangent_stiffness(&p, &t);
-        let total: f64 = t.iter().map(|t| 0.5 * (p[t[1] as usize] - p[t[0] as usize]).cross(p[t[2] as usize] - p[t[0] as usize]).length()).sum();
+        let total: f64 = t
+            .iter()
+            .map(|t| {
+                0.5 * (p[t[1] as usize] - p[t[0] as usize])
+                    .cross(p[t[2] as usize] - p[t[0] as usize])
+                    .length()
+            })
+            .sum();
         assert!((s.area.iter().sum::<f64>() - total).abs() < 1e-9);
         // The cotangent Laplacian reproduces linear functions exactly at interior vertices
         // (K u = 0 there for u = a·x + b·y + c), on any planar triangulation.

@@ -162,11 +162,18 @@ pub enum HeatError {
 }
 
 /// Computes bone-heat skinning weights for `template` bound to `skeleton` (see the module docs).
-pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions) -> Result<HeatResult, HeatError> {
+pub fn bone_heat(
+    template: &Template,
+    skeleton: &Skeleton,
+    options: &HeatOptions,
+) -> Result<HeatResult, HeatError> {
     let start = Instant::now();
     template.validate()?;
     check_options(options)?;
-    let mut stats = HeatStats { vertices: template.vertex_count(), ..Default::default() };
+    let mut stats = HeatStats {
+        vertices: template.vertex_count(),
+        ..Default::default()
+    };
 
     let heads = bones::joint_heads(skeleton).map_err(HeatError::SingularBind)?;
     let tails: Option<Vec<DVec3>> = match &options.bone_tails {
@@ -174,12 +181,20 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
         Some(t) if t.len() == skeleton.len() && t.iter().all(|v| v.is_finite()) => {
             Some(t.iter().map(|v| v.as_dvec3()).collect())
         }
-        Some(t) => return Err(HeatError::BadTails { len: t.len(), joints: skeleton.len() }),
+        Some(t) => {
+            return Err(HeatError::BadTails {
+                len: t.len(),
+                joints: skeleton.len(),
+            });
+        }
     };
     let segments = bones::bone_segments(skeleton, &heads, tails.as_deref(), options.leaf_fraction);
     stats.segments = segments.len();
 
-    let bounds = template.bounds().ok_or(MeshError::Empty { vertices: 0, triangles: 0 })?;
+    let bounds = template.bounds().ok_or(MeshError::Empty {
+        vertices: 0,
+        triangles: 0,
+    })?;
     // Include the bones in the scale so that a tiny mesh far from its skeleton still has sane
     // tolerances.
     let mut lo = bounds.min.as_dvec3();
@@ -190,7 +205,11 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
     }
     let diag = (hi - lo).length().max(f64::MIN_POSITIVE);
 
-    let welded = weld::weld(&template.positions, &template.triangles, options.weld_tolerance * diag);
+    let welded = weld::weld(
+        &template.positions,
+        &template.triangles,
+        options.weld_tolerance * diag,
+    );
     stats.welded_vertices = welded.positions.len();
     stats.collapsed_triangles = welded.collapsed_triangles;
     stats.duplicate_triangles = welded.duplicate_triangles;
@@ -199,8 +218,13 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
     stats.degenerate_triangles = stiffness.used.iter().filter(|u| !**u).count();
     let (component, n_components) = weld::components(n, &welded.triangles, &stiffness.used);
     stats.components = n_components;
-    let used_triangles: Vec<[u32; 3]> =
-        welded.triangles.iter().zip(&stiffness.used).filter(|(_, u)| **u).map(|(t, _)| *t).collect();
+    let used_triangles: Vec<[u32; 3]> = welded
+        .triangles
+        .iter()
+        .zip(&stiffness.used)
+        .filter(|(_, u)| **u)
+        .map(|(t, _)| *t)
+        .collect();
     let bvh = bvh::Bvh::new(&welded.positions, &used_triangles);
     let normals = attach::cone_normals(&welded.positions, &welded.triangles, &stiffness.used);
     stats.setup_s = start.elapsed().as_secs_f64();
@@ -213,7 +237,14 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
         min_distance: 1e-9 * diag,
     };
     let in_mesh: Vec<bool> = component.iter().map(|&c| c != u32::MAX).collect();
-    let mut attachment = attach::attach(&welded.positions, &normals, &in_mesh, &segments, &bvh, params);
+    let mut attachment = attach::attach(
+        &welded.positions,
+        &normals,
+        &in_mesh,
+        &segments,
+        &bvh,
+        params,
+    );
     // Components where nobody sees a bone: redo them by distance alone.
     let mut sees = vec![false; n_components];
     for (a, &c) in attachment.iter().zip(&component) {
@@ -223,14 +254,20 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
     }
     stats.fallback_components = sees.iter().filter(|s| !**s).count();
     if stats.fallback_components > 0 {
-        let blind: Vec<bool> = component.iter().map(|&c| c != u32::MAX && !sees[c as usize]).collect();
+        let blind: Vec<bool> = component
+            .iter()
+            .map(|&c| c != u32::MAX && !sees[c as usize])
+            .collect();
         let redo = attach::attach(
             &welded.positions,
             &normals,
             &blind,
             &segments,
             &bvh,
-            AttachParams { ignore_visibility: true, ..params },
+            AttachParams {
+                ignore_visibility: true,
+                ..params
+            },
         );
         for (v, a) in redo.into_iter().enumerate() {
             if blind[v] {
@@ -238,7 +275,11 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
             }
         }
     }
-    stats.unattached_vertices = attachment.iter().zip(&in_mesh).filter(|(a, m)| **m && a.joints.is_empty()).count();
+    stats.unattached_vertices = attachment
+        .iter()
+        .zip(&in_mesh)
+        .filter(|(a, m)| **m && a.joints.is_empty())
+        .count();
     stats.attach_s = t.elapsed().as_secs_f64();
 
     // Unknowns: welded vertices in a usable triangle (every such component now has heat).
@@ -255,17 +296,25 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
         .filter(|&v| in_mesh[v])
         .map(|v| {
             let a = &attachment[v];
-            if a.joints.is_empty() { 0.0 } else { stiffness.area[v] * options.heat_constant / (a.distance * a.distance) }
+            if a.joints.is_empty() {
+                0.0
+            } else {
+                stiffness.area[v] * options.heat_constant / (a.distance * a.distance)
+            }
         })
         .collect();
-    let edges: Vec<(u32, u32, f64)> =
-        stiffness.edges.iter().map(|&(i, j, w)| (unknown[i as usize], unknown[j as usize], w)).collect();
+    let edges: Vec<(u32, u32, f64)> = stiffness
+        .edges
+        .iter()
+        .map(|&(i, j, w)| (unknown[i as usize], unknown[j as usize], w))
+        .collect();
     let t = Instant::now();
     let factor = match solve::Factor::new(m, &edges, &mh) {
         Ok(f) => f,
         Err(_) => {
             stats.clamped_negative_cotangents = true;
-            let clamped: Vec<(u32, u32, f64)> = edges.iter().map(|&(i, j, w)| (i, j, w.max(0.0))).collect();
+            let clamped: Vec<(u32, u32, f64)> =
+                edges.iter().map(|&(i, j, w)| (i, j, w.max(0.0))).collect();
             solve::Factor::new(m, &clamped, &mh).map_err(|e| HeatError::Factorization(e.0))?
         }
     };
@@ -316,19 +365,28 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
     stats.raw_min = if m > 0 { raw_min } else { 0.0 };
 
     // Vertices outside any usable triangle, or with nothing left: nearest segment(s) by distance.
-    let nearest_params = AttachParams { ignore_visibility: true, ..params };
+    let nearest_params = AttachParams {
+        ignore_visibility: true,
+        ..params
+    };
     let mut fallback = 0;
-    for v in 0..n {
-        let total: f32 = rows[v].iter().map(|r| r.1).sum();
+    for (row, p) in rows.iter_mut().zip(&welded.positions) {
+        let total: f32 = row.iter().map(|r| r.1).sum();
         if total > 0.0 && total.is_finite() {
             continue;
         }
         fallback += 1;
-        let a: Attachment =
-            attach::attach(&welded.positions[v..=v], &[DVec3::ZERO], &[true], &segments, &bvh, nearest_params)
-                .pop()
-                .unwrap_or_default();
-        rows[v] = a.joints.iter().map(|&(j, s)| (j, s as f32)).collect();
+        let a: Attachment = attach::attach(
+            std::slice::from_ref(p),
+            &[DVec3::ZERO],
+            &[true],
+            &segments,
+            &bvh,
+            nearest_params,
+        )
+        .pop()
+        .unwrap_or_default();
+        *row = a.joints.iter().map(|&(j, s)| (j, s as f32)).collect();
     }
     stats.fallback_vertices = fallback;
 
@@ -351,13 +409,31 @@ pub fn bone_heat(template: &Template, skeleton: &Skeleton, options: &HeatOptions
 }
 
 fn check_options(o: &HeatOptions) -> Result<(), HeatError> {
-    let ok = |c: bool, name| if c { Ok(()) } else { Err(HeatError::BadOption(name)) };
-    ok(o.heat_constant.is_finite() && o.heat_constant > 0.0, "heat_constant")?;
-    ok(o.tie_tolerance.is_finite() && o.tie_tolerance >= 0.0, "tie_tolerance")?;
+    let ok = |c: bool, name| {
+        if c {
+            Ok(())
+        } else {
+            Err(HeatError::BadOption(name))
+        }
+    };
+    ok(
+        o.heat_constant.is_finite() && o.heat_constant > 0.0,
+        "heat_constant",
+    )?;
+    ok(
+        o.tie_tolerance.is_finite() && o.tie_tolerance >= 0.0,
+        "tie_tolerance",
+    )?;
     ok((-1.0..=1.0).contains(&o.cone_cos), "cone_cos")?;
     ok((0.0..0.5).contains(&o.min_weight), "min_weight")?;
-    ok(o.weld_tolerance.is_finite() && o.weld_tolerance >= 0.0, "weld_tolerance")?;
-    ok(o.leaf_fraction.is_finite() && o.leaf_fraction >= 0.0, "leaf_fraction")
+    ok(
+        o.weld_tolerance.is_finite() && o.weld_tolerance >= 0.0,
+        "weld_tolerance",
+    )?;
+    ok(
+        o.leaf_fraction.is_finite() && o.leaf_fraction >= 0.0,
+        "leaf_fraction",
+    )
 }
 
 /// Normalises a row, drops weights below `min_weight` and normalises again; the largest weight

@@ -26,7 +26,11 @@ impl Factor {
     /// Factorises the symmetric matrix with off-diagonal `edges` `(i, j, w)` (entry `−w`, i > j,
     /// each edge once, vertices already renumbered to unknowns) and diagonal
     /// `Σ_j w_ij + diag[i]`. Sequential: two threads were slower on this machine.
-    pub(crate) fn new(n: usize, edges: &[(u32, u32, f64)], diag: &[f64]) -> Result<Self, FactorError> {
+    pub(crate) fn new(
+        n: usize,
+        edges: &[(u32, u32, f64)],
+        diag: &[f64],
+    ) -> Result<Self, FactorError> {
         let mut d = diag.to_vec();
         let mut triplets: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(edges.len() + n);
         for &(i, j, w) in edges {
@@ -38,12 +42,19 @@ impl Factor {
         triplets.extend(d.iter().enumerate().map(|(i, &v)| Triplet::new(i, i, v)));
         let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets)
             .map_err(|e| FactorError(format!("{e:?}")))?;
-        let symbolic = factorize_symbolic_cholesky(a.symbolic(), Side::Lower, Default::default(), Default::default())
-            .map_err(|e| FactorError(format!("{e:?}")))?;
+        let symbolic = factorize_symbolic_cholesky(
+            a.symbolic(),
+            Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| FactorError(format!("{e:?}")))?;
         let mut values = vec![0.0; symbolic.len_val()];
         let par = Par::Seq;
-        let mut mem = MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
-            .map_err(|e| FactorError(format!("{e:?}")))?;
+        let mut mem = MemBuffer::try_new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
+        )
+        .map_err(|e| FactorError(format!("{e:?}")))?;
         symbolic
             .factorize_numeric_llt::<f64>(
                 &mut values,
@@ -55,14 +66,21 @@ impl Factor {
                 Default::default(),
             )
             .map_err(|e| FactorError(format!("{e:?}")))?;
-        Ok(Self { symbolic, values, n })
+        Ok(Self {
+            symbolic,
+            values,
+            n,
+        })
     }
 
     /// Solves for every column of `rhs` (`n` rows) in place.
     pub(crate) fn solve_in_place(&self, rhs: &mut Mat<f64>) {
         debug_assert_eq!(rhs.nrows(), self.n);
         let par = Par::Seq;
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), par));
+        let mut mem = MemBuffer::new(
+            self.symbolic
+                .solve_in_place_scratch::<f64>(rhs.ncols(), par),
+        );
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
             Conj::No,
             rhs.as_mut(),
@@ -102,8 +120,9 @@ mod tests {
         for k in 0..4 {
             for i in k + 1..4 {
                 let r = m[i][k] / m[k][k];
-                for c in k..4 {
-                    m[i][c] -= r * m[k][c];
+                let row_k = m[k];
+                for (x, a) in m[i].iter_mut().zip(row_k).skip(k) {
+                    *x -= r * a;
                 }
                 y[i] -= r * y[k];
             }
@@ -113,7 +132,12 @@ mod tests {
             x[i] = (y[i] - (i + 1..4).map(|c| m[i][c] * x[c]).sum::<f64>()) / m[i][i];
         }
         for i in 0..4 {
-            assert!((rhs[(i, 0)] - x[i]).abs() < 1e-12, "{i}: {} vs {}", rhs[(i, 0)], x[i]);
+            assert!(
+                (rhs[(i, 0)] - x[i]).abs() < 1e-12,
+                "{i}: {} vs {}",
+                rhs[(i, 0)],
+                x[i]
+            );
         }
     }
 

@@ -47,7 +47,11 @@ pub(crate) fn weld(positions: &[Vec3], triangles: &[[u32; 3]], tolerance: f64) -
         'search: for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    let kk = [k[0].wrapping_add(dx), k[1].wrapping_add(dy), k[2].wrapping_add(dz)];
+                    let kk = [
+                        k[0].wrapping_add(dx),
+                        k[1].wrapping_add(dy),
+                        k[2].wrapping_add(dz),
+                    ];
                     if let Some(list) = grid.get(&kk) {
                         for &w in list {
                             if welded[w as usize].distance_squared(p) <= tol2 {
@@ -84,13 +88,23 @@ pub(crate) fn weld(positions: &[Vec3], triangles: &[[u32; 3]], tolerance: f64) -
         }
         tris.push(t);
     }
-    Welded { positions: welded, triangles: tris, of_input, collapsed_triangles: collapsed, duplicate_triangles: duplicate }
+    Welded {
+        positions: welded,
+        triangles: tris,
+        of_input,
+        collapsed_triangles: collapsed,
+        duplicate_triangles: duplicate,
+    }
 }
 
 /// Connected components of the graph whose edges are the triangles flagged in `used`:
 /// the component of every vertex (`u32::MAX` for a vertex in no used triangle) and their count.
 #[must_use]
-pub(crate) fn components(vertices: usize, triangles: &[[u32; 3]], used: &[bool]) -> (Vec<u32>, usize) {
+pub(crate) fn components(
+    vertices: usize,
+    triangles: &[[u32; 3]],
+    used: &[bool],
+) -> (Vec<u32>, usize) {
     let mut parent: Vec<u32> = (0..vertices as u32).collect();
     fn find(parent: &mut [u32], mut v: u32) -> u32 {
         while parent[v as usize] != v {
