@@ -19,6 +19,8 @@ pub mod camera;
 pub mod capture;
 #[cfg(feature = "std")]
 pub mod gltf_io;
+#[cfg(feature = "std")]
+pub mod makehuman;
 pub mod math;
 pub mod mesh;
 pub mod pose;

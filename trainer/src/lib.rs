@@ -1,11 +1,12 @@
 //! Skinfield trainer: bone-heat initial weights, synthetic captures, SkinNet training with
 //! candle, export to `.skf`, and evaluation against ground truth.
 
-pub mod raster;
-pub mod synth;
 pub mod distance_transform;
 pub mod geodesic;
+pub mod heat;
 pub mod losses;
 pub mod optim;
+pub mod raster;
 pub mod skinnet;
+pub mod synth;
 pub mod train;
