@@ -112,6 +112,39 @@ pub fn pose_static(
     })
 }
 
+/// Poses `rest` with dense per-vertex weights (`rest.len() × skeleton.len()`, row-major, e.g.
+/// SkinNet's output for this pose) under linear blend skinning.
+pub fn pose_dense_lbs(
+    skeleton: &Skeleton,
+    weights: &[f32],
+    rest: &[Vec3],
+    pose: &Pose,
+) -> Result<Vec<Vec3>, PosingError> {
+    let j = skeleton.len();
+    if rest.len().checked_mul(j) != Some(weights.len()) {
+        return Err(PosingError::Mismatch {
+            weights_vertices: weights.len() / j,
+            weights_joints: j,
+            vertices: rest.len(),
+            joints: j,
+        });
+    }
+    let mats = skinning_matrices(skeleton, pose)?;
+    Ok(rest
+        .iter()
+        .zip(weights.chunks_exact(j))
+        .map(|(&x, w)| {
+            // Blend the matrices, then transform once: the same sum, J times fewer transforms.
+            let m = mats
+                .iter()
+                .zip(w)
+                .filter(|(_, w)| **w != 0.0)
+                .fold(Mat4::ZERO, |acc, (m, &w)| acc + *m * w);
+            m.transform_point3(x)
+        })
+        .collect())
+}
+
 fn dqs_point(dqs: &[DualQuat], skin: &StaticSkin, v: usize, x: Vec3) -> Vec3 {
     let (joints, weights) = skin.influences(v);
     let mut heaviest = 0;
@@ -216,6 +249,27 @@ mod tests {
                 "dqs direction at {angle}: {dqs} vs {expect}"
             );
         }
+    }
+
+    #[test]
+    fn dense_lbs_equals_sparse_lbs() {
+        let s = two_bones();
+        let dense = [0.2, 0.8, 0.6, 0.4, 1.0, 0.0];
+        let skin = StaticSkin::from_dense(&dense, 2).unwrap();
+        let rest = [
+            Vec3::new(0.1, 0.4, 0.2),
+            Vec3::new(-0.3, 1.2, 0.1),
+            Vec3::new(0.0, 2.0, -0.5),
+        ];
+        let mut pose = twisted(0.9);
+        pose.locals[1].rotation *= Quat::from_rotation_x(0.4);
+        pose.locals[0].translation = Vec3::new(0.5, 0.0, -0.2);
+        let a = pose_static(&s, &skin, &rest, &pose, Blend::Linear).unwrap();
+        let b = pose_dense_lbs(&s, &dense, &rest, &pose).unwrap();
+        for (a, b) in a.iter().zip(&b) {
+            assert!((*a - *b).length() < 1e-5, "{a} vs {b}");
+        }
+        assert!(pose_dense_lbs(&s, &dense[..4], &rest, &pose).is_err());
     }
 
     #[test]
