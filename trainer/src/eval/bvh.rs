@@ -17,8 +17,7 @@ pub const LEAF_SIZE: usize = 4;
 struct Node {
     min: Vec3,
     max: Vec3,
-    /// Leaf: first index into `order`; inner: index of the left child (the right one follows it
-    /// in no particular place, so it is stored in `right`).
+    /// Leaf: first index into `order`; inner: index of the left child.
     start: u32,
     /// Leaf: triangle count (> 0); inner: 0.
     count: u32,
