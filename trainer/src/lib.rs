@@ -2,3 +2,5 @@
 //! candle, export to `.skf`, and evaluation against ground truth.
 
 pub mod eval;
+pub mod raster;
+pub mod synth;

@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Print the version.
     Version,
+    /// Write the built-in synthetic multi-view capture (procedural clothed character).
+    Synth(cli::synth::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -28,6 +30,7 @@ fn main() {
             println!("{}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Synth(args) => cli::synth::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.
