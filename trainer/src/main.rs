@@ -20,6 +20,10 @@ enum Command {
     Version,
     /// Write the built-in synthetic multi-view capture (procedural clothed character).
     Synth(cli::synth::Args),
+    /// Score skinnings against a capture's ground-truth test meshes (M2S, S2M, Chamfer in cm).
+    Eval(cli::eval::Args),
+    /// Draw a posed mesh over a captured image, or coloured by its error against the ground truth.
+    Render(cli::render::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -31,6 +35,8 @@ fn main() {
             Ok(())
         }
         Command::Synth(args) => cli::synth::run(args),
+        Command::Eval(args) => cli::eval::run(args),
+        Command::Render(args) => cli::render::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -1,2 +1,4 @@
 //! One module per `trainer` subcommand: its clap `Args` and a `run(args) -> anyhow::Result<()>`.
 pub mod synth;
+pub mod eval;
+pub mod render;

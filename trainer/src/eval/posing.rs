@@ -162,11 +162,11 @@ fn dqs_point(dqs: &[DualQuat], skin: &StaticSkin, v: usize, x: Vec3) -> Vec3 {
         let dq = dqs[j as usize];
         // q and -q are the same rotation; blending across hemispheres would cancel them.
         let w = if dq.real.dot(pivot) < 0.0 { -w } else { w };
-        real = real + dq.real * w;
-        dual = dual + dq.dual * w;
+        real += dq.real * w;
+        dual += dq.dual * w;
     }
     let norm = real.length();
-    if !(norm > 1e-12) {
+    if norm.is_nan() || norm <= 1e-12 {
         // Opposite rotations with equal weights: no defined blend; keep the heaviest joint's.
         return dqs[joints[heaviest] as usize].transform_point(x);
     }

@@ -6,8 +6,7 @@ use glam::Vec3;
 use skinfield_formats::Camera;
 use skinfield_formats::mesh::area_weighted_normals;
 
-use crate::raster::shade::{Light, shade};
-use crate::raster::{NO_TRIANGLE, rasterize};
+use crate::raster::{Light, NO_TRIANGLE, rasterize, shade};
 
 /// Opacity of the mesh drawn over a captured image.
 pub const OVERLAY_OPACITY: f32 = 0.6;

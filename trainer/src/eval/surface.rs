@@ -145,7 +145,7 @@ pub fn surface_metrics(
     let on_truth = sample_surface(
         ground_truth,
         samples,
-        seed ^ 0x5EED_0F_57A7E,
+        seed ^ 0x05EE_D0F5_7A7E,
         "ground truth",
     )?;
     let truth_bvh = TriangleBvh::new(ground_truth.positions, ground_truth.triangles);
