@@ -591,9 +591,14 @@ impl TemplateFile {
         };
         t.validate()
             .map_err(|e| CaptureError::invalid(file, "mesh", e))?;
-        let bad_color = |c: &Vec3| !(c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= 1.0);
+        let bad_color =
+            |c: &Vec3| !(c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= 1.0);
         if let Some(i) = t.colors.as_ref().and_then(|c| c.iter().position(bad_color)) {
-            return Err(CaptureError::invalid(file, format!("colors[{i}]"), "not in [0, 1]"));
+            return Err(CaptureError::invalid(
+                file,
+                format!("colors[{i}]"),
+                "not in [0, 1]",
+            ));
         }
         if let Some(i) = t
             .normals

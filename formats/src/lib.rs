@@ -15,14 +15,16 @@ extern crate alloc;
 pub mod camera;
 #[cfg(feature = "std")]
 pub mod capture;
+#[cfg(feature = "std")]
+pub mod gltf_io;
 pub mod math;
 pub mod mesh;
 pub mod pose;
-#[cfg(feature = "std")]
-pub mod shared_data;
 pub mod skeleton;
 pub mod skf;
 pub mod skin;
+#[cfg(feature = "std")]
+pub mod shared_data;
 
 pub use camera::{Camera, CameraError, CameraRig, Distortion};
 pub use math::{Aabb, Transform};

@@ -24,6 +24,8 @@ enum Command {
     Eval(cli::eval::Args),
     /// Draw a posed mesh over a captured image, or coloured by its error against the ground truth.
     Render(cli::render::Args),
+    /// Describe a glTF/GLB or .skf file as one JSON object.
+    Inspect(cli::inspect::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -37,6 +39,7 @@ fn main() {
         Command::Synth(args) => cli::synth::run(args),
         Command::Eval(args) => cli::eval::run(args),
         Command::Render(args) => cli::render::run(args),
+        Command::Inspect(args) => cli::inspect::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -92,7 +92,9 @@ fn pixels(frame: usize, cam: usize) -> (Vec<Vec3>, Vec<bool>) {
     let rgb = (0..48)
         .map(|i| Vec3::new(i as f32 / 47.0, (frame as f32) * 0.25, cam as f32 * 0.5))
         .collect();
-    let mask = (0..48).map(|i| (i + frame + cam) % 3 == 0).collect();
+    let mask = (0..48)
+        .map(|i| (i + frame + cam).is_multiple_of(3))
+        .collect();
     (rgb, mask)
 }
 
@@ -204,7 +206,8 @@ fn edit_json(path: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
 
 #[test]
 fn errors_name_the_file_and_field() {
-    let cases: Vec<(&str, &str, &str, Box<dyn Fn(&mut serde_json::Value)>)> = vec![
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let cases: Vec<(&str, &str, &str, Edit)> = vec![
         (
             "manifest.json",
             "manifest.json",

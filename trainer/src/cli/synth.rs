@@ -1,10 +1,13 @@
-//! `trainer synth --out DIR`: writes the built-in synthetic capture.
+//! `trainer synth --out DIR`: writes the built-in synthetic capture, or with
+//! `--character FILE --train-clips A,B --test-clips C [--motion OTHER.glb]` a capture of a
+//! rigged glTF character.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
-use skinfield_trainer::synth::{SynthConfig, synthesize};
+use skinfield_formats::capture::ImageFormat;
+use skinfield_trainer::synth::{GltfSource, SynthConfig, synthesize, synthesize_gltf};
 
 /// Arguments of `trainer synth`.
 #[derive(ClapArgs, Debug)]
@@ -30,9 +33,24 @@ pub struct Args {
     /// Marching grid cells along the character's height.
     #[arg(long, default_value_t = SynthConfig::default().grid)]
     pub grid: usize,
-    /// Template vertex count after simplification (about).
+    /// Template vertex count after simplification (about; built-in character only).
     #[arg(long, default_value_t = SynthConfig::default().target_vertices)]
     pub vertices: usize,
+    /// Write the colour images as linear float EXR instead of 8-bit sRGB PNG.
+    #[arg(long)]
+    pub exr: bool,
+    /// A rigged glTF/GLB character instead of the built-in one.
+    #[arg(long)]
+    pub character: Option<PathBuf>,
+    /// A glTF/GLB whose clips drive the character (joints matched by name).
+    #[arg(long, requires = "character")]
+    pub motion: Option<PathBuf>,
+    /// Training clip names (with `--character`).
+    #[arg(long, value_delimiter = ',', requires = "character")]
+    pub train_clips: Vec<String>,
+    /// Test clip names (with `--character`), disjoint from the training clips.
+    #[arg(long, value_delimiter = ',', requires = "character")]
+    pub test_clips: Vec<String>,
 }
 
 /// Runs `trainer synth`.
@@ -45,11 +63,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         height: args.resolution,
         grid: args.grid,
         target_vertices: args.vertices,
+        image_format: if args.exr {
+            ImageFormat::Exr
+        } else {
+            ImageFormat::Png
+        },
         seed: args.seed,
         ..SynthConfig::default()
     };
-    let s = synthesize(&args.out, &config)
-        .with_context(|| format!("writing the capture to {}", args.out.display()))?;
+    let s = match &args.character {
+        None => synthesize(&args.out, &config),
+        Some(character) => {
+            let source = GltfSource {
+                character: character.clone(),
+                motion: args.motion.clone(),
+                train_clips: args.train_clips.clone(),
+                test_clips: args.test_clips.clone(),
+            };
+            synthesize_gltf(&args.out, &config, &source)
+        }
+    }
+    .with_context(|| format!("writing the capture to {}", args.out.display()))?;
     println!(
         "wrote {}: {} vertices, {} triangles, {} joints; {} train + {} test frames × {} cameras; \
          character {:.2} s, total {:.2} s",

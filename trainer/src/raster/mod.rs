@@ -284,8 +284,8 @@ impl Setup {
             edge_canonical(self.v[2], self.v[0], p),
             edge_canonical(self.v[0], self.v[1], p),
         ];
-        for k in 0..3 {
-            if e[k] < 0.0 || (e[k] == 0.0 && !self.owns_edge[k]) {
+        for (&ek, &owns) in e.iter().zip(&self.owns_edge) {
+            if ek < 0.0 || (ek == 0.0 && !owns) {
                 return None;
             }
         }

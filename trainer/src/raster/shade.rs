@@ -168,7 +168,7 @@ pub fn shade(
             if n.dot(view) < 0.0 {
                 n = -n;
             }
-            let albedo = colors.map_or(Vec3::splat(0.7), |c| lerp(c));
+            let albedo = colors.map_or(Vec3::splat(0.7), lerp);
             let diffuse = n.dot(to_light).max(0.0);
             let vis = match shadow {
                 Some(s) if diffuse > 0.0 => s.visibility(p, n),

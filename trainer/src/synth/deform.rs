@@ -17,7 +17,7 @@
 //!
 //! Normals of the result are recomputed from the deformed triangles.
 
-use glam::{Mat3, Mat4, Quat, Vec3, Vec4};
+use glam::{Mat4, Quat, Vec3, Vec4};
 use skinfield_formats::math::quat_to_rotvec;
 use skinfield_formats::mesh::area_weighted_normals;
 use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
@@ -77,12 +77,19 @@ pub struct GroundTruthDeformer {
     skirt: Vec<u32>,
     skirt_offsets: Vec<u32>,
     skirt_neighbours: Vec<u32>,
+    /// Joints that bulge when flexed.
+    bulge_joints: Vec<usize>,
+    /// Leg capsules the skirt is pushed out of: end joints and body radii there.
+    leg_capsules: Vec<(usize, usize, f32, f32)>,
+    /// Scale of the bulge's amplitude and radius (1 for a 1.75 m character in metres).
+    bulge_scale: f32,
 }
 
-/// Dual quaternion `(real, dual)` of a rigid matrix.
+/// Dual quaternion `(real, dual)` of a skinning matrix, which DQS takes as rigid: any scale
+/// (none for the built-in character) is dropped.
 fn dual_quat(m: &Mat4) -> (Vec4, Vec4) {
-    let r = Quat::from_mat3(&Mat3::from_mat4(*m)).normalize();
-    let t = m.w_axis.truncate();
+    let (_, r, t) = m.to_scale_rotation_translation();
+    let r = r.normalize();
     let rv = Vec4::from(r);
     // dual = ½ (t, 0) · r
     let d = qmul(Vec4::new(t.x, t.y, t.z, 0.0), rv) * 0.5;
@@ -213,7 +220,31 @@ impl GroundTruthDeformer {
             skirt,
             skirt_offsets,
             skirt_neighbours,
+            bulge_joints: BULGE_JOINTS.to_vec(),
+            leg_capsules: LEG_CAPSULES.to_vec(),
+            bulge_scale: 1.0,
         }
+    }
+
+    /// Replaces the built-in character's bulging joints and leg capsules (for another
+    /// skeleton): `bulge_joints` flex-bulge, `leg_capsules` are `(joint, end joint, radius at
+    /// joint, radius at end)` the skirt is pushed out of.
+    #[must_use]
+    pub fn with_rig(
+        mut self,
+        bulge_joints: Vec<usize>,
+        leg_capsules: Vec<(usize, usize, f32, f32)>,
+    ) -> Self {
+        self.bulge_joints = bulge_joints;
+        self.leg_capsules = leg_capsules;
+        self
+    }
+
+    /// Scales the bulge's amplitude and radius (for a character of another size or unit).
+    #[must_use]
+    pub fn with_bulge_scale(mut self, scale: f32) -> Self {
+        self.bulge_scale = scale;
+        self
     }
 
     /// The true static weights.
@@ -254,7 +285,7 @@ impl GroundTruthDeformer {
 
     fn bulge(&self, pose: &Pose, normals: &[Vec3], p: &mut [Vec3]) {
         let centres = bind_positions(&self.skeleton);
-        for &j in &BULGE_JOINTS {
+        for &j in &self.bulge_joints {
             let rel = self.skeleton.bind_local()[j].rotation.inverse() * pose.locals[j].rotation;
             let phi = quat_to_rotvec(rel.normalize()).length();
             if phi < 1e-4 {
@@ -266,7 +297,7 @@ impl GroundTruthDeformer {
                 if matches!(self.parts[v], Part::Skirt | Part::Sleeve) {
                     continue;
                 }
-                let r = (self.rest[v] - centres[j]).length() / BULGE_RADIUS;
+                let r = (self.rest[v] - centres[j]).length() / (BULGE_RADIUS * self.bulge_scale);
                 if r > 3.0 {
                     continue;
                 }
@@ -280,13 +311,18 @@ impl GroundTruthDeformer {
                     })
                     .map(|(_, w)| w)
                     .sum();
-                *pos += normals[v] * (BULGE_PER_RADIAN * phi * (-r * r).exp() * m);
+                *pos +=
+                    normals[v] * (BULGE_PER_RADIAN * self.bulge_scale * phi * (-r * r).exp() * m);
             }
         }
     }
 
     fn push_skirt(&self, world: &[Mat4], normals: &[Vec3], p: &mut [Vec3]) {
-        let capsules: Vec<(Vec3, Vec3, f32, f32)> = LEG_CAPSULES
+        if self.skirt.is_empty() || self.leg_capsules.is_empty() {
+            return;
+        }
+        let capsules: Vec<(Vec3, Vec3, f32, f32)> = self
+            .leg_capsules
             .iter()
             .map(|&(a, b, ra, rb)| {
                 (
@@ -328,13 +364,7 @@ impl GroundTruthDeformer {
                     continue;
                 }
                 let mean = nb.iter().map(|&o| prev[o as usize]).sum::<Vec3>() / nb.len() as f32;
-                // Keep at least the vertex's own push so smoothing never pulls cloth into a leg.
-                let blended = 0.5 * prev[k] + 0.5 * mean;
-                *d = if blended.length_squared() > prev[k].length_squared() {
-                    blended
-                } else {
-                    prev[k].lerp(blended, 0.5)
-                };
+                *d = 0.5 * prev[k] + 0.5 * mean;
             }
         }
         for (k, &v) in self.skirt.iter().enumerate() {

@@ -9,12 +9,13 @@
 //! bulges, skirt pushed out by the legs); twelve cameras on two rings ([`rig`]) see it rendered
 //! by the software rasteriser with Lambert + specular shading and shadows ([`output`]).
 
-use skinfield_formats::capture::CaptureError;
+use skinfield_formats::capture::{CaptureError, ImageFormat};
 use skinfield_formats::{Skeleton, SkeletonError, SkinError, Template};
 
 pub mod body;
 pub mod character;
 pub mod deform;
+pub mod gltf_source;
 mod marching;
 pub mod motion;
 pub mod output;
@@ -22,6 +23,7 @@ pub mod rig;
 pub mod texture;
 pub mod weights;
 
+pub use gltf_source::{GltfSource, synthesize_gltf};
 pub use output::{SynthSummary, synthesize};
 
 /// Why a synthetic capture could not be made.
@@ -33,6 +35,9 @@ pub enum SynthError {
     /// The true weights are invalid.
     #[error("true weights: {0}")]
     Skin(#[from] SkinError),
+    /// The glTF character or motion could not be read.
+    #[error(transparent)]
+    Gltf(#[from] skinfield_formats::gltf_io::GltfError),
     /// Writing the capture failed.
     #[error(transparent)]
     Capture(#[from] CaptureError),
@@ -66,6 +71,8 @@ pub struct SynthConfig {
     pub target_vertices: usize,
     /// Shadow map size in texels per side.
     pub shadow_map: usize,
+    /// Colour images as 8-bit sRGB PNG or linear float EXR (masks are always PNG).
+    pub image_format: ImageFormat,
     /// Seed of every random choice (colour noise, motion amplitudes, camera jitter).
     pub seed: u64,
 }
@@ -81,6 +88,7 @@ impl Default for SynthConfig {
             grid: 180,
             target_vertices: 10_000,
             shadow_map: 512,
+            image_format: ImageFormat::Png,
             seed: 0,
         }
     }
@@ -99,6 +107,7 @@ impl SynthConfig {
             grid: 40,
             target_vertices: 2500,
             shadow_map: 96,
+            image_format: ImageFormat::Png,
             seed: 0,
         }
     }

@@ -126,7 +126,7 @@ fn frame(skeleton: &Skeleton, clip: &str, s: f32, amp: f32) -> (f32, Vec3, Vec<f
         }
         "lunge_left" => {
             let d = e * amp;
-            a.pair(L_HIP, R_HIP, 0, -1.0 * d, 0.35 * d, false);
+            a.pair(L_HIP, R_HIP, 0, -d, 0.35 * d, false);
             a.pair(L_KNEE, R_KNEE, 0, 1.2 * d, 0.9 * d, false);
             rest_arms(&mut a, 1.0);
             root = Vec3::new(0.0, -0.2 * d, 0.12 * d);

@@ -9,10 +9,11 @@ use glam::Vec3;
 use rayon::prelude::*;
 use skinfield_formats::capture::{
     CAPTURE_FORMAT, CAPTURE_VERSION, CameraEntry, CaptureManifest, CaptureWriter, ClipEntry,
-    EvaluationEntry, ImageFormat, SourceEntry,
+    EvaluationEntry, SourceEntry,
 };
-use skinfield_formats::{Camera, Template};
+use skinfield_formats::{Camera, CameraRig, Pose, Skeleton, Template};
 
+use super::deform::GroundTruthDeformer;
 use super::motion::{CLIPS, Split, library};
 use super::rig::camera_rig;
 use super::{SynthConfig, SynthError, build_character};
@@ -70,6 +71,24 @@ pub fn render_view(
     (rgb, frags.mask())
 }
 
+/// What gets filmed: a template, its skeleton, its ground-truth deformer and the motion.
+pub struct Subject<'a> {
+    /// The template (bind pose).
+    pub template: &'a Template,
+    /// The skeleton.
+    pub skeleton: &'a Skeleton,
+    /// The ground-truth deformer.
+    pub deformer: &'a GroundTruthDeformer,
+    /// Per frame: clip name, split, pose.
+    pub frames: Vec<(String, Split, Pose)>,
+    /// The cameras.
+    pub rig: CameraRig,
+    /// Where the character comes from (`procedural` or a file name), for the manifest.
+    pub character: String,
+    /// What the ground-truth deformer does, for the manifest.
+    pub deformer_description: String,
+}
+
 /// Makes the built-in synthetic capture in `dir` (see [`skinfield_formats::capture`] for the
 /// layout). Same configuration and seed, same bytes.
 pub fn synthesize(dir: &Path, config: &SynthConfig) -> Result<SynthSummary, SynthError> {
@@ -82,21 +101,45 @@ pub fn synthesize(dir: &Path, config: &SynthConfig) -> Result<SynthSummary, Synt
         config.train_frames_per_clip,
         config.test_frames_per_clip,
         config.seed,
-    )?;
-    let rig = camera_rig(config.cameras, config.width, config.height, config.seed);
-    let light = Light::default();
+    )?
+    .into_iter()
+    .map(|f| (CLIPS[f.clip].0.to_string(), CLIPS[f.clip].1, f.pose))
+    .collect();
+    let subject = Subject {
+        template: &character.template,
+        skeleton: &character.skeleton,
+        deformer: &character.deformer,
+        frames,
+        rig: camera_rig(config.cameras, config.width, config.height, config.seed),
+        character: "procedural".into(),
+        deformer_description:
+            "dual-quaternion skinning with the true weights + flexion bulge at elbows and knees + \
+                               skirt pushed out of the leg capsules (trainer::synth::deform)"
+                .into(),
+    };
+    write_subject(dir, config, &subject, start, character_seconds)
+}
 
+/// Renders and writes a subject as a capture in `dir`.
+pub fn write_subject(
+    dir: &Path,
+    config: &SynthConfig,
+    subject: &Subject<'_>,
+    start: Instant,
+    character_seconds: f64,
+) -> Result<SynthSummary, SynthError> {
+    let light = Light::default();
+    let rig = &subject.rig;
     let mut clips = Vec::new();
     let (mut train, mut test) = (Vec::new(), Vec::new());
-    for (f, frame) in frames.iter().enumerate() {
-        let (name, split) = CLIPS[frame.clip];
+    for (f, (name, split, _)) in subject.frames.iter().enumerate() {
         match clips.last_mut() {
-            Some(ClipEntry { name: n, count, .. }) if n.as_str() == name => *count += 1,
+            Some(ClipEntry { name: n, count, .. }) if n == name => *count += 1,
             _ => clips.push(ClipEntry {
-                name: name.into(),
+                name: name.clone(),
                 first: f,
                 count: 1,
-                split: if split == Split::Train {
+                split: if *split == Split::Train {
                     "train"
                 } else {
                     "test"
@@ -104,7 +147,7 @@ pub fn synthesize(dir: &Path, config: &SynthConfig) -> Result<SynthSummary, Synt
                 .into(),
             }),
         }
-        if split == Split::Train {
+        if *split == Split::Train {
             train.push(f)
         } else {
             test.push(f)
@@ -118,50 +161,50 @@ pub fn synthesize(dir: &Path, config: &SynthConfig) -> Result<SynthSummary, Synt
         template: "template.json".into(),
         motion: "motion.json".into(),
         initial_weights: None,
-        frame_count: frames.len(),
+        frame_count: subject.frames.len(),
         clips,
         train_frames: train.clone(),
         test_frames: test.clone(),
         images: "images".into(),
         masks: "masks".into(),
-        image_format: ImageFormat::Png,
+        image_format: config.image_format,
         evaluation: Some(EvaluationEntry {
             gt_meshes: "eval/gt".into(),
             true_weights: Some("eval/true_weights.json".into()),
-            deformer: "dual-quaternion skinning with the true weights + flexion bulge at elbows and knees + skirt \
-                       pushed out of the leg capsules (trainer::synth::deform)"
-                .into(),
+            deformer: subject.deformer_description.clone(),
         }),
         source: Some(SourceEntry {
             generator: format!("trainer synth {}", env!("CARGO_PKG_VERSION")),
-            character: "procedural".into(),
+            character: subject.character.clone(),
             seed: config.seed,
             light_direction: light.direction.to_array(),
         }),
     };
     let writer = CaptureWriter::new(dir, manifest)?;
-    writer.write_template(&character.template, &character.skeleton)?;
+    writer.write_template(subject.template, subject.skeleton)?;
     writer.write_motion(
-        &frames.iter().map(|f| f.pose.clone()).collect::<Vec<_>>(),
+        &subject
+            .frames
+            .iter()
+            .map(|f| f.2.clone())
+            .collect::<Vec<_>>(),
         FPS,
     )?;
-    writer.write_true_weights(character.deformer.skin())?;
+    writer.write_true_weights(subject.deformer.skin())?;
 
-    frames
-        .par_iter()
-        .enumerate()
-        .try_for_each(|(f, frame)| -> Result<(), SynthError> {
-            let (positions, normals) = character.deformer.deform(&frame.pose)?;
+    subject.frames.par_iter().enumerate().try_for_each(
+        |(f, (_, split, pose))| -> Result<(), SynthError> {
+            let (positions, normals) = subject.deformer.deform(pose)?;
             let shadow = ShadowMap::build(
                 light.direction,
                 &positions,
-                &character.template.triangles,
+                &subject.template.triangles,
                 config.shadow_map,
             );
             for (c, camera) in rig.cameras.iter().enumerate() {
                 let (rgb, mask) = render_view(
                     camera,
-                    &character.template,
+                    subject.template,
                     &positions,
                     &normals,
                     &light,
@@ -170,16 +213,17 @@ pub fn synthesize(dir: &Path, config: &SynthConfig) -> Result<SynthSummary, Synt
                 writer.write_image(c, f, &rgb)?;
                 writer.write_mask(c, f, &mask)?;
             }
-            if CLIPS[frame.clip].1 == Split::Test {
+            if *split == Split::Test {
                 writer.write_gt_mesh(f, &positions)?;
             }
             Ok(())
-        })?;
+        },
+    )?;
     writer.finish()?;
     Ok(SynthSummary {
-        vertices: character.template.vertex_count(),
-        triangles: character.template.triangles.len(),
-        joints: character.skeleton.len(),
+        vertices: subject.template.vertex_count(),
+        triangles: subject.template.triangles.len(),
+        joints: subject.skeleton.len(),
         train_frames: train.len(),
         test_frames: test.len(),
         cameras: rig.cameras.len(),

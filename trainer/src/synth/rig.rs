@@ -21,6 +21,21 @@ pub const FOV_Y: f32 = 0.78;
 /// exactly symmetric. Names are `cam00`, `cam01`, …
 #[must_use]
 pub fn camera_rig(count: usize, width: u32, height: u32, seed: u64) -> CameraRig {
+    camera_rig_around(count, width, height, seed, TARGET, 1.75)
+}
+
+/// The same rig scaled to a subject of height `subject_height` (model units) centred on
+/// `target`: ring heights, radius and jitter scale with the subject.
+#[must_use]
+pub fn camera_rig_around(
+    count: usize,
+    width: u32,
+    height: u32,
+    seed: u64,
+    target: Vec3,
+    subject_height: f32,
+) -> CameraRig {
+    let scale = subject_height / 1.75;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xC0FF_EE00);
     let per_ring = count.div_ceil(2).max(1);
     let cameras = (0..count)
@@ -29,8 +44,13 @@ pub fn camera_rig(count: usize, width: u32, height: u32, seed: u64) -> CameraRig
             let k = i / 2;
             let step = std::f32::consts::TAU / per_ring as f32;
             let azimuth = step * (k as f32 + 0.5 * ring as f32) + rng.random_range(-0.035..0.035);
-            let y = RING_HEIGHTS[ring] + rng.random_range(-0.03..0.03);
-            let eye = Vec3::new(RING_RADIUS * azimuth.sin(), y, RING_RADIUS * azimuth.cos());
+            let y =
+                target.y + scale * (RING_HEIGHTS[ring] - TARGET.y + rng.random_range(-0.03..0.03));
+            let eye = Vec3::new(
+                target.x + scale * RING_RADIUS * azimuth.sin(),
+                y,
+                target.z + scale * RING_RADIUS * azimuth.cos(),
+            );
             Camera::look_at(
                 &format!("cam{i:02}"),
                 width,

@@ -266,3 +266,118 @@ fn bulge_and_skirt_push_out_move_the_surface_beyond_dqs() {
         assert!((pushed[v] - base[v]).length() < 1e-6);
     }
 }
+
+#[test]
+fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
+    let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
+        return;
+    };
+    let source = GltfSource {
+        character: data.join("quaternius-witch/Witch.gltf"),
+        motion: None,
+        train_clips: vec!["Walk".into()],
+        test_clips: vec!["Kick_Left".into()],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig {
+        train_frames_per_clip: 2,
+        test_frames_per_clip: 2,
+        ..SynthConfig::tiny()
+    };
+    let summary = synthesize_gltf(dir.path(), &config, &source).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    assert_eq!((summary.joints, cap.template.vertex_count()), (62, 13884));
+    assert_eq!(
+        (cap.train_frames.clone(), cap.test_frames.clone()),
+        (vec![0, 1], vec![2, 3])
+    );
+    let mask = cap.load_mask(0, 2).unwrap();
+    assert!(
+        mask.inside.iter().filter(|&&m| m).count() > 50,
+        "the witch is in view"
+    );
+    // The ground truth (DQS + bulge with the artist weights) differs from LBS with the same
+    // weights on a kick, so static LBS cannot reproduce it.
+    let weights = cap.evaluation_true_weights().unwrap().unwrap();
+    let gt = cap.evaluation_gt_mesh(2).unwrap();
+    let l = lbs(
+        &cap.skeleton,
+        &weights,
+        &cap.template.positions,
+        &cap.poses[2],
+    )
+    .unwrap();
+    let max = gt
+        .iter()
+        .zip(&l)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0f32, f32::max);
+    let height = cap.template.bounds().unwrap().size().y;
+    assert!(
+        max > 0.005 * height,
+        "GT vs LBS differ by at most {max} (height {height})"
+    );
+    // Clips from a separate motion file bind by joint name: the same file gives the same poses.
+    let by_name = GltfSource {
+        motion: Some(source.character.clone()),
+        ..source.clone()
+    };
+    let dir2 = tempfile::tempdir().unwrap();
+    synthesize_gltf(dir2.path(), &config, &by_name).unwrap();
+    let cap2 = load_capture(dir2.path()).unwrap();
+    for (a, b) in cap.poses.iter().zip(&cap2.poses) {
+        for (j, (x, y)) in a.locals.iter().zip(&b.locals).enumerate() {
+            assert!(
+                (x.translation - y.translation).length() < 1e-5
+                    && x.rotation.dot(y.rotation).abs() > 1.0 - 1e-6,
+                "{j} {} {x:?} {y:?}",
+                cap.skeleton.names()[j]
+            );
+        }
+    }
+    // Clip names are checked.
+    let bad = GltfSource {
+        test_clips: vec!["Walk".into()],
+        ..source.clone()
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &config, &bad),
+        Err(SynthError::Config {
+            field: "test_clips",
+            ..
+        })
+    ));
+    let bad = GltfSource {
+        test_clips: vec!["Moonwalk".into()],
+        ..source
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &config, &bad),
+        Err(SynthError::Config {
+            field: "test_clips",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn exr_images_carry_the_same_pixels_as_png_before_quantisation() {
+    let (png, exr) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    synthesize(png.path(), &SynthConfig::tiny()).unwrap();
+    let config = SynthConfig {
+        image_format: skinfield_formats::capture::ImageFormat::Exr,
+        ..SynthConfig::tiny()
+    };
+    synthesize(exr.path(), &config).unwrap();
+    let (a, b) = (
+        load_capture(png.path()).unwrap(),
+        load_capture(exr.path()).unwrap(),
+    );
+    assert!(b.image_path(1, 2).extension().is_some_and(|e| e == "exr"));
+    let (pa, pb) = (a.load_image(1, 2).unwrap(), b.load_image(1, 2).unwrap());
+    // 8-bit sRGB quantisation is the only difference (at most ~0.5/255 · 2.4 in linear terms near white).
+    for (x, y) in pa.rgb.iter().zip(&pb.rgb) {
+        assert!((*x - *y).abs().max_element() < 0.006, "{x} vs {y}");
+    }
+    assert!(pb.rgb.iter().any(|p| p.max_element() > 0.1));
+}
