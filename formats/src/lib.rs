@@ -18,6 +18,8 @@ pub mod capture;
 #[cfg(feature = "std")]
 pub mod gltf_io;
 pub mod math;
+#[cfg(feature = "std")]
+pub mod makehuman;
 pub mod mesh;
 pub mod pose;
 pub mod skeleton;

@@ -2,5 +2,6 @@
 //! candle, export to `.skf`, and evaluation against ground truth.
 
 pub mod eval;
+pub mod heat;
 pub mod raster;
 pub mod synth;

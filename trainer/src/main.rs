@@ -26,6 +26,8 @@ enum Command {
     Render(cli::render::Args),
     /// Describe a glTF/GLB or .skf file as one JSON object.
     Inspect(cli::inspect::Args),
+    /// Bone-heat (Pinocchio) skinning weights for a glTF character, written back as glTF.
+    Heat(cli::heat::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -40,6 +42,7 @@ fn main() {
         Command::Eval(args) => cli::eval::run(args),
         Command::Render(args) => cli::render::run(args),
         Command::Inspect(args) => cli::inspect::run(args),
+        Command::Heat(args) => cli::heat::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -1,0 +1,776 @@
+//! The MakeHuman base body: Wavefront OBJ mesh, `.mhskel` JSON skeleton and `.mhw` JSON
+//! weights, read into a [`Template`], a [`Skeleton`] and a [`StaticSkin`].
+//!
+//! A `.mhskel` stores no joint positions: every bone names a head and a tail *joint*, and a joint
+//! is the centroid of a list of OBJ vertex indices (the `joint-*` helper cubes of `base.obj`).
+//! A bone's rotation plane names three joints. The OBJ is in decimetres; positions are scaled by
+//! [`MakeHumanOptions::scale`] (0.1 by default, giving metres).
+//!
+//! Choices made here (MakeHuman's own code is AGPL and was not consulted):
+//! - Joint `j` of the [`Skeleton`] is bone `j`, placed at the bone's head. Joints are ordered by a
+//!   depth-first walk from the roots, children in name order (parents before children).
+//! - The bind frame of a bone has local +Y along head → tail (Blender's convention) and local +X
+//!   along the rotation plane's normal made orthogonal to +Y; the frame only fixes what "zero
+//!   rotation" means for pose angles and has no effect on skinning.
+//! - Only the OBJ vertices used by faces of the selected groups become template vertices, in OBJ
+//!   order; [`MakeHumanAsset::obj_vertex`] maps them back. Texture coordinates are per face
+//!   corner in the OBJ and are not carried (the template's `uvs` is `None`); normals are
+//!   area-weighted from the triangles. Polygons are fan-triangulated.
+//! - `.mhw` weights are not normalised in the file (sums 0.32–1.67); [`StaticSkin::new`]
+//!   normalises them and counts how many were off.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Mat3, Quat, Vec3};
+
+use crate::math::Transform;
+use crate::mesh::{MAX_VERTICES, MeshError, Template};
+use crate::skeleton::{MAX_JOINTS, Skeleton, SkeletonError};
+use crate::skin::{SkinError, StaticSkin};
+
+/// Largest file this reader opens (bytes); `base.obj` is about 2 MiB.
+pub const MAX_FILE_BYTES: u64 = 256 << 20;
+/// Most triangles a read mesh may have.
+pub const MAX_TRIANGLES: usize = 1 << 24;
+/// Most vertices one OBJ polygon may list.
+pub const MAX_POLYGON_CORNERS: usize = 64;
+
+/// Why a MakeHuman asset could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum MakeHumanError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is larger than [`MAX_FILE_BYTES`].
+    #[error("{path}: file has {bytes} bytes, more than the cap of {MAX_FILE_BYTES}")]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Its size.
+        bytes: u64,
+    },
+    /// An OBJ line is malformed or out of range.
+    #[error("{path}:{line}: {what}")]
+    Obj {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        what: String,
+    },
+    /// The JSON does not parse.
+    #[error("{path}: invalid JSON: {source}")]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The parser's error.
+        source: serde_json::Error,
+    },
+    /// A JSON field is missing, of the wrong type or refers to something that does not exist.
+    #[error("{path}: field `{field}`: {what}")]
+    Field {
+        /// The file.
+        path: PathBuf,
+        /// The field (a JSON path).
+        field: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// The skeleton is invalid.
+    #[error("{path}: {source}")]
+    Skeleton {
+        /// The `.mhskel` file.
+        path: PathBuf,
+        /// Why.
+        source: SkeletonError,
+    },
+    /// The selected groups give an invalid mesh.
+    #[error("{path}: {source}")]
+    Mesh {
+        /// The OBJ file.
+        path: PathBuf,
+        /// Why.
+        source: MeshError,
+    },
+    /// The weights are invalid (e.g. a template vertex has none).
+    #[error("{path}: {source}")]
+    Skin {
+        /// The `.mhw` file.
+        path: PathBuf,
+        /// Why.
+        source: SkinError,
+    },
+}
+
+/// What to read.
+#[derive(Clone, Debug)]
+pub struct MakeHumanOptions {
+    /// OBJ groups (`g NAME`) whose faces form the template; empty selects every group.
+    pub groups: Vec<String>,
+    /// Factor from file units to metres (the hm08 files are in decimetres: 0.1).
+    pub scale: f32,
+}
+
+impl Default for MakeHumanOptions {
+    fn default() -> Self {
+        Self {
+            groups: vec!["body".to_owned()],
+            scale: 0.1,
+        }
+    }
+}
+
+/// A loaded MakeHuman character.
+#[derive(Clone, Debug)]
+pub struct MakeHumanAsset {
+    /// The mesh of the selected groups (metres).
+    pub template: Template,
+    /// One joint per bone, at the bone's head.
+    pub skeleton: Skeleton,
+    /// The `.mhw` weights of the template's vertices, normalised.
+    pub skin: StaticSkin,
+    /// World bind-pose tail of every bone (metres), joint order.
+    pub bone_tails: Vec<Vec3>,
+    /// OBJ vertex index (0-based) of each template vertex.
+    pub obj_vertex: Vec<u32>,
+    /// Number of vertices in the whole OBJ.
+    pub obj_vertex_count: usize,
+    /// Number of polygons in the whole OBJ.
+    pub obj_face_count: usize,
+    /// Distinct group names in the OBJ, in first-appearance order.
+    pub obj_groups: Vec<String>,
+}
+
+/// Reads `base.obj`, `default.mhskel` and `default_weights.mhw` from `dir`.
+pub fn load_makehuman_dir(
+    dir: &Path,
+    options: &MakeHumanOptions,
+) -> Result<MakeHumanAsset, MakeHumanError> {
+    load_makehuman(
+        &dir.join("base.obj"),
+        &dir.join("default.mhskel"),
+        &dir.join("default_weights.mhw"),
+        options,
+    )
+}
+
+/// Reads a MakeHuman OBJ, skeleton and weights.
+pub fn load_makehuman(
+    obj: &Path,
+    mhskel: &Path,
+    mhw: &Path,
+    options: &MakeHumanOptions,
+) -> Result<MakeHumanAsset, MakeHumanError> {
+    let text = read_text(obj)?;
+    let parsed = parse_obj(obj, &text)?;
+    let selected: Vec<bool> = parsed
+        .group_names
+        .iter()
+        .map(|g| options.groups.is_empty() || options.groups.iter().any(|s| s == g))
+        .collect();
+    let nv = parsed.positions.len();
+    let mut used = vec![false; nv];
+    for (poly, &g) in parsed.polygons.iter().zip(&parsed.polygon_group) {
+        if selected[g] {
+            for &v in poly {
+                used[v as usize] = true;
+            }
+        }
+    }
+    let obj_vertex: Vec<u32> = (0..nv as u32).filter(|&v| used[v as usize]).collect();
+    let mut remap = vec![u32::MAX; nv];
+    for (t, &o) in obj_vertex.iter().enumerate() {
+        remap[o as usize] = t as u32;
+    }
+    let mut triangles = Vec::new();
+    for (poly, &g) in parsed.polygons.iter().zip(&parsed.polygon_group) {
+        if selected[g] {
+            for k in 1..poly.len() - 1 {
+                triangles.push([poly[0], poly[k], poly[k + 1]].map(|v| remap[v as usize]));
+            }
+        }
+    }
+    let mut template = Template {
+        positions: obj_vertex
+            .iter()
+            .map(|&o| parsed.positions[o as usize] * options.scale)
+            .collect(),
+        triangles,
+        ..Default::default()
+    };
+    template.compute_normals();
+    template.validate().map_err(|source| MakeHumanError::Mesh {
+        path: obj.to_owned(),
+        source,
+    })?;
+
+    let (skeleton, bone_tails) = read_skeleton(mhskel, &parsed.positions, options.scale)?;
+    let skin = read_weights(mhw, &skeleton, &remap, obj_vertex.len())?;
+    Ok(MakeHumanAsset {
+        template,
+        skeleton,
+        skin,
+        bone_tails,
+        obj_vertex,
+        obj_vertex_count: nv,
+        obj_face_count: parsed.polygons.len(),
+        obj_groups: parsed.group_names,
+    })
+}
+
+fn read_text(path: &Path) -> Result<String, MakeHumanError> {
+    let io = |source| MakeHumanError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let bytes = std::fs::metadata(path).map_err(io)?.len();
+    if bytes > MAX_FILE_BYTES {
+        return Err(MakeHumanError::TooLarge {
+            path: path.to_owned(),
+            bytes,
+        });
+    }
+    std::fs::read_to_string(path).map_err(io)
+}
+
+struct ParsedObj {
+    positions: Vec<Vec3>,
+    polygons: Vec<Vec<u32>>,
+    polygon_group: Vec<usize>,
+    group_names: Vec<String>,
+}
+
+fn parse_obj(path: &Path, text: &str) -> Result<ParsedObj, MakeHumanError> {
+    let err = |line: usize, what: String| MakeHumanError::Obj {
+        path: path.to_owned(),
+        line: line + 1,
+        what,
+    };
+    let mut positions = Vec::new();
+    let mut polygons: Vec<Vec<u32>> = Vec::new();
+    let mut polygon_group = Vec::new();
+    let mut group_names: Vec<String> = Vec::new();
+    let mut current_group: Option<usize> = None;
+    let mut triangle_count = 0usize;
+    for (ln, line) in text.lines().enumerate() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => {
+                if positions.len() >= MAX_VERTICES {
+                    return Err(err(ln, format!("more than {MAX_VERTICES} vertices")));
+                }
+                let mut p = [0.0f32; 3];
+                for c in &mut p {
+                    let s = it
+                        .next()
+                        .ok_or_else(|| err(ln, "vertex with fewer than 3 coordinates".into()))?;
+                    *c = s
+                        .parse()
+                        .map_err(|_| err(ln, format!("bad coordinate `{s}`")))?;
+                    if !c.is_finite() {
+                        return Err(err(ln, format!("non-finite coordinate `{s}`")));
+                    }
+                }
+                positions.push(Vec3::from_array(p));
+            }
+            Some("g") => {
+                let name = it.collect::<Vec<_>>().join(" ");
+                let g = match group_names.iter().position(|n| *n == name) {
+                    Some(g) => g,
+                    None => {
+                        group_names.push(name);
+                        group_names.len() - 1
+                    }
+                };
+                current_group = Some(g);
+            }
+            Some("f") => {
+                let mut poly = Vec::new();
+                for corner in it {
+                    if poly.len() >= MAX_POLYGON_CORNERS {
+                        return Err(err(
+                            ln,
+                            format!("polygon with more than {MAX_POLYGON_CORNERS} corners"),
+                        ));
+                    }
+                    let first = corner.split('/').next().unwrap_or("");
+                    let i: i64 = first
+                        .parse()
+                        .map_err(|_| err(ln, format!("bad face index `{corner}`")))?;
+                    // OBJ indices are 1-based; negative ones count back from the latest vertex.
+                    let n = positions.len() as i64;
+                    let v = if i > 0 { i - 1 } else { n + i };
+                    if i == 0 || v < 0 || v >= n {
+                        return Err(err(ln, format!("face index {i} out of range (1..={n})")));
+                    }
+                    poly.push(v as u32);
+                }
+                if poly.len() < 3 {
+                    return Err(err(ln, format!("face with {} corners", poly.len())));
+                }
+                triangle_count += poly.len() - 2;
+                if triangle_count > MAX_TRIANGLES {
+                    return Err(err(ln, format!("more than {MAX_TRIANGLES} triangles")));
+                }
+                let g = match current_group {
+                    Some(g) => g,
+                    None => {
+                        // Faces before any `g` line belong to OBJ's implicit group "default".
+                        group_names.push("default".to_owned());
+                        current_group = Some(group_names.len() - 1);
+                        group_names.len() - 1
+                    }
+                };
+                polygons.push(poly);
+                polygon_group.push(g);
+            }
+            _ => {}
+        }
+    }
+    Ok(ParsedObj {
+        positions,
+        polygons,
+        polygon_group,
+        group_names,
+    })
+}
+
+fn read_json(path: &Path) -> Result<serde_json::Value, MakeHumanError> {
+    let text = read_text(path)?;
+    serde_json::from_str(&text).map_err(|source| MakeHumanError::Json {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+fn read_skeleton(
+    path: &Path,
+    obj_positions: &[Vec3],
+    scale: f32,
+) -> Result<(Skeleton, Vec<Vec3>), MakeHumanError> {
+    let field = |field: &str, what: String| MakeHumanError::Field {
+        path: path.to_owned(),
+        field: field.to_owned(),
+        what,
+    };
+    let json = read_json(path)?;
+    let bones = json
+        .get("bones")
+        .and_then(|b| b.as_object())
+        .ok_or_else(|| field("bones", "missing or not an object".into()))?;
+    let joints = json
+        .get("joints")
+        .and_then(|b| b.as_object())
+        .ok_or_else(|| field("joints", "missing or not an object".into()))?;
+    let planes = json.get("planes").and_then(|b| b.as_object());
+    if bones.len() > MAX_JOINTS {
+        return Err(MakeHumanError::Skeleton {
+            path: path.to_owned(),
+            source: SkeletonError::TooManyJoints(bones.len()),
+        });
+    }
+    let joint_pos = |name: &str, at: &str| -> Result<Vec3, MakeHumanError> {
+        let list = joints
+            .get(name)
+            .and_then(|l| l.as_array())
+            .ok_or_else(|| field(at, format!("joint `{name}` is not listed in `joints`")))?;
+        if list.is_empty() {
+            return Err(field(&format!("joints.{name}"), "empty vertex list".into()));
+        }
+        let mut sum = glam::DVec3::ZERO;
+        for v in list {
+            let i = v
+                .as_u64()
+                .filter(|&i| (i as usize) < obj_positions.len())
+                .ok_or_else(|| {
+                    field(
+                        &format!("joints.{name}"),
+                        format!("`{v}` is not a vertex index below {}", obj_positions.len()),
+                    )
+                })?;
+            sum += obj_positions[i as usize].as_dvec3();
+        }
+        Ok((sum / list.len() as f64).as_vec3() * scale)
+    };
+
+    // Parent links by name; BTreeMap keeps the walk below deterministic (children in name order).
+    let mut children: BTreeMap<Option<&str>, Vec<&str>> = BTreeMap::new();
+    for (name, bone) in bones {
+        let parent = match bone.get("parent") {
+            None | Some(serde_json::Value::Null) => None,
+            Some(serde_json::Value::String(p)) => {
+                if !bones.contains_key(p) {
+                    return Err(field(
+                        &format!("bones.{name}.parent"),
+                        format!("unknown bone `{p}`"),
+                    ));
+                }
+                Some(p.as_str())
+            }
+            Some(other) => {
+                return Err(field(
+                    &format!("bones.{name}.parent"),
+                    format!("`{other}` is not a string"),
+                ));
+            }
+        };
+        children.entry(parent).or_default().push(name.as_str());
+    }
+    let mut order: Vec<&str> = Vec::with_capacity(bones.len());
+    let mut stack: Vec<&str> = children
+        .get(&None)
+        .map(|c| c.iter().rev().copied().collect())
+        .unwrap_or_default();
+    while let Some(b) = stack.pop() {
+        order.push(b);
+        if let Some(c) = children.get(&Some(b)) {
+            stack.extend(c.iter().rev());
+        }
+    }
+    if order.len() != bones.len() {
+        return Err(field("bones", "parent links form a cycle".into()));
+    }
+    let index: BTreeMap<&str, usize> = order.iter().enumerate().map(|(i, &n)| (n, i)).collect();
+
+    let n = order.len();
+    let mut heads = Vec::with_capacity(n);
+    let mut tails = Vec::with_capacity(n);
+    let mut world_rot = Vec::with_capacity(n);
+    let mut parents = Vec::with_capacity(n);
+    for &name in &order {
+        let bone = &bones[name];
+        let at = |k: &str| format!("bones.{name}.{k}");
+        let jname = |k: &str| {
+            bone.get(k)
+                .and_then(|v| v.as_str())
+                .ok_or_else(|| field(&at(k), "missing or not a string".into()))
+        };
+        let head = joint_pos(jname("head")?, &at("head"))?;
+        let tail = joint_pos(jname("tail")?, &at("tail"))?;
+        let y = (tail - head).try_normalize().unwrap_or(Vec3::Y);
+        let normal = bone
+            .get("rotation_plane")
+            .and_then(|p| p.as_str())
+            .and_then(|p| planes.and_then(|pl| pl.get(p)))
+            .and_then(|p| p.as_array())
+            .filter(|p| p.len() == 3)
+            .map(|p| -> Result<Vec3, MakeHumanError> {
+                let mut q = [Vec3::ZERO; 3];
+                for (q, name) in q.iter_mut().zip(p) {
+                    let name = name.as_str().ok_or_else(|| {
+                        field(&at("rotation_plane"), "plane joint is not a string".into())
+                    })?;
+                    *q = joint_pos(name, &at("rotation_plane"))?;
+                }
+                Ok((q[1] - q[0]).cross(q[2] - q[1]))
+            })
+            .transpose()?
+            .unwrap_or(Vec3::ZERO);
+        let x = (normal - normal.dot(y) * y)
+            .try_normalize()
+            .unwrap_or_else(|| y.any_orthonormal_vector());
+        let z = x.cross(y);
+        world_rot.push(Quat::from_mat3(&Mat3::from_cols(x, y, z)).normalize());
+        heads.push(head);
+        tails.push(tail);
+        parents.push(
+            bone.get("parent")
+                .and_then(|p| p.as_str())
+                .map(|p| index[p]),
+        );
+    }
+    let bind_local = (0..n)
+        .map(|j| match parents[j] {
+            None => Transform::from_rotation_translation(world_rot[j], heads[j]),
+            Some(p) => {
+                let inv = world_rot[p].inverse();
+                Transform::from_rotation_translation(
+                    (inv * world_rot[j]).normalize(),
+                    inv * (heads[j] - heads[p]),
+                )
+            }
+        })
+        .collect();
+    let names = order.iter().map(|s| (*s).to_owned()).collect();
+    let skeleton = Skeleton::new(names, parents, bind_local, None, None, glam::Mat4::IDENTITY)
+        .map_err(|source| MakeHumanError::Skeleton {
+            path: path.to_owned(),
+            source,
+        })?;
+    Ok((skeleton, tails))
+}
+
+fn read_weights(
+    path: &Path,
+    skeleton: &Skeleton,
+    remap: &[u32],
+    vertices: usize,
+) -> Result<StaticSkin, MakeHumanError> {
+    let field = |field: String, what: String| MakeHumanError::Field {
+        path: path.to_owned(),
+        field,
+        what,
+    };
+    let json = read_json(path)?;
+    let weights = json
+        .get("weights")
+        .and_then(|w| w.as_object())
+        .ok_or_else(|| field("weights".into(), "missing or not an object".into()))?;
+    let mut per_vertex: Vec<Vec<(u32, f32)>> = vec![Vec::new(); vertices];
+    for (bone, list) in weights {
+        let at = || format!("weights.{bone}");
+        let j = skeleton
+            .find(bone)
+            .ok_or_else(|| field(at(), "no bone of that name in the skeleton".into()))?;
+        let list = list
+            .as_array()
+            .ok_or_else(|| field(at(), "not an array".into()))?;
+        for pair in list {
+            let (v, w) = match pair.as_array().map(Vec::as_slice) {
+                Some([v, w]) => (v.as_u64(), w.as_f64()),
+                _ => (None, None),
+            };
+            let (Some(v), Some(w)) = (v, w) else {
+                return Err(field(
+                    at(),
+                    format!("`{pair}` is not a [vertex, weight] pair"),
+                ));
+            };
+            let t = *remap.get(v as usize).ok_or_else(|| {
+                field(
+                    at(),
+                    format!("vertex {v} is beyond the OBJ's {}", remap.len()),
+                )
+            })?;
+            if t != u32::MAX {
+                per_vertex[t as usize].push((j as u32, w as f32));
+            }
+        }
+    }
+    let mut offsets = Vec::with_capacity(vertices + 1);
+    offsets.push(0u32);
+    let (mut joints, mut ws) = (Vec::new(), Vec::new());
+    for mut inf in per_vertex {
+        inf.sort_by_key(|&(j, _)| j);
+        for (j, w) in inf {
+            joints.push(j);
+            ws.push(w);
+        }
+        offsets.push(joints.len() as u32);
+    }
+    StaticSkin::new(offsets, joints, ws, skeleton.len()).map_err(|source| MakeHumanError::Skin {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    const OBJ: &str = "v 0 0 0\nv 10 0 0\nv 10 10 0\nv 0 10 0\nv 0 20 0\ng body\nf 1/1 2/2 3/3 4/4\ng other\nf 1 3 5\n";
+    const SKEL: &str = r#"{"bones": {
+        "root": {"head": "a", "tail": "b", "parent": null, "rotation_plane": "p"},
+        "tip": {"head": "b", "tail": "c", "parent": "root", "rotation_plane": "p"}},
+      "joints": {"a": [0, 1], "b": [2, 3], "c": [4]},
+      "planes": {"p": ["a", "b", "c"]}}"#;
+    const MHW: &str = r#"{"weights": {"root": [[0, 1.0], [1, 0.5], [2, 0.25]], "tip": [[2, 0.25], [3, 2.0], [4, 1.0]]}}"#;
+
+    #[test]
+    fn reads_a_small_hand_made_asset() {
+        let dir = tempfile::tempdir().unwrap();
+        let (o, s, w) = (
+            write(dir.path(), "a.obj", OBJ),
+            write(dir.path(), "a.mhskel", SKEL),
+            write(dir.path(), "a.mhw", MHW),
+        );
+        let a = load_makehuman(&o, &s, &w, &MakeHumanOptions::default()).unwrap();
+        assert_eq!(a.obj_vertex, vec![0, 1, 2, 3]);
+        assert_eq!(a.template.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(a.obj_groups, vec!["body".to_owned(), "other".to_owned()]);
+        assert!((a.template.positions[2] - Vec3::new(1.0, 1.0, 0.0)).length() < 1e-6);
+        assert_eq!(a.skeleton.names(), &["root".to_owned(), "tip".to_owned()]);
+        // root head = centroid of vertices 0 and 1 = (5, 0, 0) dm; tip head = (5, 10, 0) dm.
+        let world = |j: usize| {
+            a.skeleton.inverse_bind()[j]
+                .inverse()
+                .transform_point3(Vec3::ZERO)
+        };
+        assert!((world(0) - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-5);
+        assert!((world(1) - Vec3::new(0.5, 1.0, 0.0)).length() < 1e-5);
+        assert!((a.bone_tails[1] - Vec3::new(0.0, 2.0, 0.0)).length() < 1e-5);
+        // The bind frame's +Y runs head → tail.
+        let y = a.skeleton.inverse_bind()[0]
+            .inverse()
+            .transform_vector3(Vec3::Y);
+        assert!((y - Vec3::Y).length() < 1e-5);
+        // Vertex 2: 0.25 + 0.25 → normalised 0.5 / 0.5; vertex 3: only tip; vertex 4 is not in `body`.
+        assert_eq!(a.skin.vertex_count(), 4);
+        assert_eq!(a.skin.influences(2), (&[0u32, 1][..], &[0.5f32, 0.5][..]));
+        assert_eq!(a.skin.influences(3), (&[1u32][..], &[1.0f32][..]));
+        assert_eq!(a.skin.unnormalized_count(), 3);
+        let all = load_makehuman(
+            &o,
+            &s,
+            &w,
+            &MakeHumanOptions {
+                groups: vec![],
+                scale: 1.0,
+            },
+        )
+        .unwrap();
+        assert_eq!(all.template.vertex_count(), 5);
+        assert_eq!(all.template.triangles.len(), 3);
+    }
+
+    #[test]
+    fn bad_inputs_name_the_file_and_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let (s, w) = (
+            write(dir.path(), "a.mhskel", SKEL),
+            write(dir.path(), "a.mhw", MHW),
+        );
+        let opts = MakeHumanOptions::default();
+        let bad_obj = write(dir.path(), "b.obj", "v 0 0 0\ng body\nf 1 2 3\n");
+        let e = load_makehuman(&bad_obj, &s, &w, &opts).unwrap_err();
+        assert!(matches!(e, MakeHumanError::Obj { line: 3, .. }), "{e}");
+        let nan_obj = write(dir.path(), "c.obj", "v 0 nan 0\n");
+        assert!(matches!(
+            load_makehuman(&nan_obj, &s, &w, &opts),
+            Err(MakeHumanError::Obj { line: 1, .. })
+        ));
+        let o = write(dir.path(), "a.obj", OBJ);
+        let bad_skel = write(dir.path(), "b.mhskel", &SKEL.replace("[4]", "[9]"));
+        let e = load_makehuman(&o, &bad_skel, &w, &opts).unwrap_err();
+        assert!(
+            matches!(&e, MakeHumanError::Field { field, .. } if field == "joints.c"),
+            "{e}"
+        );
+        let cyc = write(dir.path(), "c.mhskel", &SKEL.replace("null", "\"tip\""));
+        assert!(matches!(
+            load_makehuman(&o, &cyc, &w, &opts),
+            Err(MakeHumanError::Field { .. })
+        ));
+        let bad_w = write(dir.path(), "b.mhw", &MHW.replace("\"tip\"", "\"nope\""));
+        let e = load_makehuman(&o, &s, &bad_w, &opts).unwrap_err();
+        assert!(
+            matches!(&e, MakeHumanError::Field { field, .. } if field == "weights.nope"),
+            "{e}"
+        );
+        assert!(e.to_string().contains("b.mhw"));
+        let missing = write(dir.path(), "c.mhw", r#"{"weights": {"root": [[0, 1.0]]}}"#);
+        assert!(matches!(
+            load_makehuman(&o, &s, &missing, &opts),
+            Err(MakeHumanError::Skin { .. })
+        ));
+        let e = load_makehuman(&dir.path().join("none.obj"), &s, &w, &opts).unwrap_err();
+        assert!(matches!(e, MakeHumanError::Io { .. }));
+    }
+}
+
+#[cfg(test)]
+mod shared_asset_tests {
+    use super::*;
+
+    /// The counts of `makehuman-hm08/SOURCE.md`, checked against the real files.
+    #[test]
+    fn hm08_matches_its_source_notes() {
+        let Some(data) = crate::shared_data::shared_data_dir() else {
+            return;
+        };
+        let dir = data.join("makehuman-hm08");
+        let body = load_makehuman_dir(&dir, &MakeHumanOptions::default()).unwrap();
+        assert_eq!(body.obj_vertex_count, 19_158);
+        assert_eq!(body.obj_face_count, 18_486);
+        // SOURCE.md's "172 groups" counts `g` statements; the eyelash helpers and the tights are
+        // split over several statements of the same name, leaving 139 distinct groups.
+        let text = std::fs::read_to_string(dir.join("base.obj")).unwrap();
+        assert_eq!(text.lines().filter(|l| l.starts_with("g ")).count(), 172);
+        assert_eq!(body.obj_groups.len(), 139);
+        assert_eq!(
+            body.obj_groups
+                .iter()
+                .filter(|g| g.starts_with("joint-"))
+                .count(),
+            125
+        );
+        assert_eq!(body.template.vertex_count(), 13_380);
+        assert_eq!(body.template.triangles.len(), 2 * 13_378);
+        assert_eq!(body.skeleton.len(), 163);
+        assert_eq!(
+            body.skeleton
+                .parents()
+                .iter()
+                .filter(|p| p.is_none())
+                .count(),
+            1
+        );
+        assert_eq!(body.skeleton.names()[0], "root");
+        // Decimetres became metres: the body is about 1.67 m tall.
+        let b = body.template.bounds().unwrap();
+        assert!((1.6..1.75).contains(&b.size().y), "{b:?}");
+
+        let all = load_makehuman_dir(
+            &dir,
+            &MakeHumanOptions {
+                groups: vec![],
+                scale: 0.1,
+            },
+        )
+        .unwrap();
+        assert_eq!(all.template.vertex_count(), 19_158);
+        // SOURCE.md: y from -8.45 to 8.50 decimetres over all vertices.
+        let ab = all.template.bounds().unwrap();
+        assert!(
+            (ab.min.y + 0.845).abs() < 0.001 && (ab.max.y - 0.850).abs() < 0.001,
+            "{ab:?}"
+        );
+        let mut weighted_joints = vec![false; all.skeleton.len()];
+        let mut histogram = BTreeMap::new();
+        for v in 0..all.skin.vertex_count() {
+            let (j, _) = all.skin.influences(v);
+            *histogram.entry(j.len()).or_insert(0) += 1;
+            for &j in j {
+                weighted_joints[j as usize] = true;
+            }
+        }
+        assert_eq!(weighted_joints.iter().filter(|&&w| w).count(), 139);
+        let expected: BTreeMap<usize, usize> = [
+            (1, 4101),
+            (2, 5321),
+            (3, 3813),
+            (4, 2258),
+            (5, 1661),
+            (6, 968),
+            (7, 627),
+            (8, 358),
+            (9, 23),
+            (10, 8),
+            (12, 20),
+        ]
+        .into_iter()
+        .collect();
+        assert_eq!(histogram, expected);
+        // Every child's head sits where MakeHuman's rig puts it: inside the body's bounding box.
+        for m in body.skeleton.inverse_bind() {
+            let head = m.inverse().transform_point3(Vec3::ZERO);
+            assert!(
+                head.cmpge(b.min - 0.05).all() && head.cmple(b.max + 0.05).all(),
+                "{head}"
+            );
+        }
+    }
+}
