@@ -19,7 +19,7 @@
 //!
 //! | argument | row | weights | blend |
 //! | --- | --- | --- | --- |
-//! | `initial` | `initial` | the capture's initial static weights | LBS |
+//! | `initial` | `initial` | the capture's initial static weights, else bone heat ([`crate::heat::bone_heat`], default options) | LBS |
 //! | `static:FILE` | `static` | a [`static_weights`] file | LBS |
 //! | `skf:FILE` | `ours` | SkinNet's pose-dependent weights from a `.skf`, by `skinfield_runtime` | LBS |
 //! | `oracle` | `oracle` | the ground-truth deformer's own static weights | LBS |
@@ -49,7 +49,7 @@ pub use table::{EvalRow, rows_from_json, rows_to_json, rows_to_table};
 /// The skinning whose posed meshes are scored.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Skinning {
-    /// The capture's initial static weights under LBS.
+    /// The capture's initial static weights under LBS; bone heat when the capture ships none.
     Initial,
     /// A static-weights file under LBS.
     Static(PathBuf),
@@ -131,9 +131,14 @@ pub enum EvalError {
     /// The capture lists no test frames.
     #[error("{}: field `test_frames` is empty: nothing to evaluate", .0.display())]
     NoTestFrames(PathBuf),
-    /// `initial` was asked for but the capture ships no initial weights.
-    #[error("{}: field `initial_weights` is absent: the capture has no initial weights", .0.display())]
-    NoInitialWeights(PathBuf),
+    /// `initial` was asked for, the capture ships no initial weights and bone heat failed.
+    #[error("{}: no `initial_weights` and bone heat failed: {source}", path.display())]
+    InitialWeights {
+        /// The capture's manifest.
+        path: PathBuf,
+        /// Why bone heat failed.
+        source: crate::heat::HeatError,
+    },
     /// `oracle` was asked for but the capture has no ground-truth weights.
     #[error("{}: field `evaluation.true_weights` is absent: the capture has no ground-truth weights", .0.display())]
     NoTrueWeights(PathBuf),
@@ -194,10 +199,21 @@ impl PreparedSkinning {
         let manifest = capture.dir.join(skinfield_formats::capture::MANIFEST_FILE);
         let weights = match skinning {
             Skinning::Initial => Weights::Static {
-                skin: capture
-                    .initial_weights
-                    .clone()
-                    .ok_or(EvalError::NoInitialWeights(manifest))?,
+                skin: match &capture.initial_weights {
+                    Some(skin) => skin.clone(),
+                    None => {
+                        crate::heat::bone_heat(
+                            &capture.template,
+                            &capture.skeleton,
+                            &crate::heat::HeatOptions::default(),
+                        )
+                        .map_err(|source| EvalError::InitialWeights {
+                            path: manifest,
+                            source,
+                        })?
+                        .skin
+                    }
+                },
                 blend: Blend::Linear,
             },
             Skinning::Static(path) => Weights::Static {
