@@ -2,6 +2,7 @@
 //! candle, export to `.skf`, and evaluation against ground truth.
 
 pub mod distance_transform;
+pub mod eval;
 pub mod geodesic;
 pub mod heat;
 pub mod losses;

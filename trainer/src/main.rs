@@ -20,6 +20,10 @@ enum Command {
     Version,
     /// Write the built-in synthetic multi-view capture (procedural clothed character).
     Synth(cli::synth::Args),
+    /// Score skinnings against a capture's ground-truth test meshes (M2S, S2M, Chamfer in cm).
+    Eval(cli::eval::Args),
+    /// Draw a posed mesh over a captured image, or coloured by its error against the ground truth.
+    Render(cli::render::Args),
     /// Describe a glTF/GLB or .skf file as one JSON object.
     Inspect(cli::inspect::Args),
     /// Bone-heat (Pinocchio) skinning weights for a glTF character, written back as glTF.
@@ -35,6 +39,8 @@ fn main() {
             Ok(())
         }
         Command::Synth(args) => cli::synth::run(args),
+        Command::Eval(args) => cli::eval::run(args),
+        Command::Render(args) => cli::render::run(args),
         Command::Inspect(args) => cli::inspect::run(args),
         Command::Heat(args) => cli::heat::run(args),
     };

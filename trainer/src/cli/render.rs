@@ -1,0 +1,93 @@
+//! `trainer render`: pictures of a posed mesh — over a captured image (`--kind overlay`, paper
+//! Fig. 3) or coloured by per-vertex M2S error (`--kind error`, paper Fig. 5) — as PNG.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::{Args as ClapArgs, ValueEnum};
+use glam::Vec3;
+use skinfield_formats::capture::{load_capture, write_image_png};
+use skinfield_trainer::eval::render::{error_image, overlay};
+use skinfield_trainer::eval::{PreparedSkinning, Skinning, per_vertex_m2s};
+
+/// Which picture to draw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Kind {
+    /// The posed mesh over the captured image of the frame.
+    Overlay,
+    /// The posed mesh coloured by per-vertex distance to the ground truth (test frames only).
+    Error,
+}
+
+/// Arguments of `trainer render`.
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// The capture folder.
+    #[arg(long)]
+    pub capture: PathBuf,
+    /// Skinning that poses the template (as in `trainer eval`).
+    #[arg(long, default_value = "oracle")]
+    pub weights: Skinning,
+    /// Picture to draw.
+    #[arg(long, value_enum, default_value_t = Kind::Overlay)]
+    pub kind: Kind,
+    /// Frame index (default: the first test frame).
+    #[arg(long)]
+    pub frame: Option<usize>,
+    /// Camera index in the capture's rig.
+    #[arg(long, default_value_t = 0)]
+    pub camera: usize,
+    /// Error mapped to red in `--kind error`, centimetres.
+    #[arg(long, default_value_t = 2.0)]
+    pub max_error_cm: f32,
+    /// Output PNG.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Runs `trainer render`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let capture = load_capture(&args.capture)
+        .with_context(|| format!("loading the capture {}", args.capture.display()))?;
+    let frame = match args.frame {
+        Some(f) => f,
+        None => *capture
+            .test_frames
+            .first()
+            .with_context(|| format!("{}: no test frames", args.capture.display()))?,
+    };
+    let camera = capture.rig.cameras.get(args.camera).with_context(|| {
+        format!(
+            "--camera {}: the rig has {} cameras",
+            args.camera,
+            capture.rig.cameras.len()
+        )
+    })?;
+    let skinning = PreparedSkinning::new(&capture, &args.weights)
+        .with_context(|| format!("loading `{}`", args.weights.method_name()))?;
+    let posed = skinning.pose_frame(&capture, frame)?;
+    let triangles = &capture.template.triangles;
+    let rgb = match args.kind {
+        Kind::Overlay => {
+            let image = capture.load_image(args.camera, frame)?;
+            overlay(camera, &image.rgb, &posed, triangles)?
+        }
+        Kind::Error => {
+            let error = per_vertex_m2s(&capture, frame, &posed)?;
+            let mean_cm = 100.0 * error.iter().map(|&e| f64::from(e)).sum::<f64>()
+                / error.len().max(1) as f64;
+            println!("frame {frame}: mean per-vertex distance to the ground truth {mean_cm:.3} cm");
+            error_image(
+                camera,
+                &posed,
+                triangles,
+                &error,
+                args.max_error_cm / 100.0,
+                Vec3::ONE,
+            )?
+        }
+    };
+    write_image_png(&args.out, camera.width, camera.height, &rgb)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
