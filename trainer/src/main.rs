@@ -28,6 +28,10 @@ enum Command {
     Inspect(cli::inspect::Args),
     /// Bone-heat (Pinocchio) skinning weights for a glTF character, written back as glTF.
     Heat(cli::heat::Args),
+    /// Train SkinNet (stage 1) or the static baseline on a capture.
+    Train(cli::train::Args),
+    /// Synthesise the built-in capture, train, export, evaluate and print the table.
+    Demo(cli::demo::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -43,6 +47,8 @@ fn main() {
         Command::Render(args) => cli::render::run(args),
         Command::Inspect(args) => cli::inspect::run(args),
         Command::Heat(args) => cli::heat::run(args),
+        Command::Train(args) => cli::train::run(args),
+        Command::Demo(args) => cli::demo::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

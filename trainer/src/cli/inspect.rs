@@ -8,13 +8,15 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow};
 use serde::Serialize;
+use skinfield_formats::bvh::load_bvh;
+use skinfield_formats::capture::load_capture;
 use skinfield_formats::gltf_io::load_gltf;
 use skinfield_formats::skf::{SkfView, read_skf_file};
 
 /// Arguments of `trainer inspect`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The file to describe (.gltf, .glb, .skf).
+    /// The file to describe (.gltf, .glb, .skf, .bvh, or a capture folder).
     pub file: PathBuf,
 }
 
@@ -32,7 +34,7 @@ pub struct ClipReport {
 /// What `inspect` prints.
 #[derive(Serialize, Debug)]
 pub struct Report {
-    /// `gltf`, `glb` or `skf`.
+    /// `gltf`, `glb`, `skf`, `bvh` or `capture`.
     pub kind: &'static str,
     /// Vertices over every primitive as stored (unwelded).
     pub vertices: usize,
@@ -62,11 +64,18 @@ pub enum Kind {
     Glb,
     /// Skinfield weight file.
     Skf,
+    /// BVH motion capture.
+    Bvh,
+    /// Capture folder (`manifest.json` inside).
+    Capture,
 }
 
 impl Kind {
     /// The kind of `path`, from its extension.
     pub fn of(path: &Path) -> anyhow::Result<Self> {
+        if path.is_dir() {
+            return Ok(Self::Capture);
+        }
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
@@ -75,8 +84,9 @@ impl Kind {
             Some("gltf") => Ok(Self::Gltf),
             Some("glb") => Ok(Self::Glb),
             Some("skf") => Ok(Self::Skf),
+            Some("bvh") => Ok(Self::Bvh),
             _ => Err(anyhow!(
-                "{}: unknown file kind (expected .gltf, .glb or .skf)",
+                "{}: unknown file kind (expected .gltf, .glb, .skf, .bvh or a capture folder)",
                 path.display()
             )),
         }
@@ -151,11 +161,57 @@ fn inspect_skf(path: &Path) -> anyhow::Result<Report> {
     })
 }
 
+fn inspect_bvh(path: &Path) -> anyhow::Result<Report> {
+    let motion = load_bvh(path).map_err(|e| anyhow!(e.to_string().replace('\n', "; ")))?;
+    let mut extra = serde_json::Map::new();
+    extra.insert("end_sites".into(), motion.end_sites.len().into());
+    extra.insert("channels".into(), motion.channel_count().into());
+    extra.insert("frame_time_s".into(), motion.frame_time.into());
+    let name = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    Ok(Report {
+        kind: "bvh",
+        vertices: 0,
+        triangles: 0,
+        joints: motion.skeleton.len(),
+        skins: 0,
+        max_influences: 0,
+        unnormalized_weights: 0,
+        clips: vec![ClipReport {
+            name,
+            duration_s: motion.duration_s(),
+            frames: motion.frame_count(),
+        }],
+        extra,
+    })
+}
+
+fn inspect_capture(dir: &Path) -> anyhow::Result<Report> {
+    let capture = load_capture(dir).map_err(|e| anyhow!(e.to_string().replace('\n', "; ")))?;
+    let mut extra = serde_json::Map::new();
+    extra.insert("cameras".into(), capture.rig.cameras.len().into());
+    extra.insert("train_frames".into(), capture.train_frames.len().into());
+    extra.insert("test_frames".into(), capture.test_frames.len().into());
+    let initial = capture.initial_weights.as_ref();
+    Ok(Report {
+        kind: "capture",
+        vertices: capture.template.vertex_count(),
+        triangles: capture.template.triangles.len(),
+        joints: capture.skeleton.len(),
+        skins: usize::from(initial.is_some()),
+        max_influences: initial.map_or(0, |s| s.max_influences()),
+        unnormalized_weights: initial.map_or(0, |s| s.unnormalized_count()),
+        clips: Vec::new(),
+        extra,
+    })
+}
+
 /// Describes `args.file` as one JSON object on stdout.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let report = match Kind::of(&args.file)? {
         k @ (Kind::Gltf | Kind::Glb) => inspect_gltf(&args.file, k)?,
         Kind::Skf => inspect_skf(&args.file)?,
+        Kind::Bvh => inspect_bvh(&args.file)?,
+        Kind::Capture => inspect_capture(&args.file)?,
     };
     println!("{}", serde_json::to_string(&report)?);
     Ok(())

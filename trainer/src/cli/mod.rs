@@ -5,3 +5,5 @@ pub mod heat;
 pub mod inspect;
 pub mod render;
 pub mod synth;
+pub mod demo;
+pub mod train;

@@ -16,6 +16,8 @@
 //! resumed run draws the same batches as an uninterrupted one.
 
 pub mod config;
+pub mod data;
+pub mod plot;
 
 use std::collections::HashMap;
 use std::io::Write;

@@ -1,0 +1,155 @@
+//! `trainer demo`: the README's main job on the built-in default. Synthesise the capture,
+//! compute bone-heat initial weights, train SkinNet (stage 1) and the static baseline, export,
+//! evaluate on the held-out test poses, print the table and write it with plots and pictures.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Parser;
+use skinfield_formats::capture::load_capture;
+use skinfield_formats::skf::write_atomic;
+use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
+use skinfield_trainer::eval::{EvalOptions, Skinning, evaluate};
+use skinfield_trainer::synth::{SynthConfig, synthesize};
+use skinfield_trainer::train::TrainConfig;
+use skinfield_trainer::train::data::{DataOptions, initial_weights};
+use skinfield_trainer::train::plot::plot_losses;
+
+use super::train::{train_skinnet, train_static};
+
+/// Arguments of `trainer demo`.
+#[derive(Parser, Debug)]
+pub struct Args {
+    /// Output folder (capture, model, results, pictures).
+    #[arg(long, default_value = "out/demo")]
+    pub out: PathBuf,
+    /// Seed of the capture and of training.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// SkinNet warm-start iterations (regressing the initial weights).
+    #[arg(long, default_value_t = 300)]
+    pub warm_start: u64,
+    /// SkinNet image-loss iterations.
+    #[arg(long, default_value_t = 300)]
+    pub iterations: u64,
+    /// Static-baseline iterations.
+    #[arg(long, default_value_t = 300)]
+    pub static_iterations: u64,
+    /// Training-template vertex count for SkinNet.
+    #[arg(long, default_value_t = DataOptions::default().train_vertices)]
+    pub train_vertices: usize,
+    /// Hide the progress bars.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Runs `trainer demo`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let total = Instant::now();
+    let out = &args.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let capture_dir = out.join("capture");
+    let mut timings = Vec::new();
+
+    let t = Instant::now();
+    let summary = synthesize(&capture_dir, &SynthConfig { seed: args.seed, ..SynthConfig::default() })?;
+    timings.push(("synthesise the capture", t.elapsed().as_secs_f64()));
+    println!(
+        "capture: {} vertices, {} joints, {} train / {} test frames → {}",
+        summary.vertices,
+        summary.joints,
+        summary.train_frames,
+        summary.test_frames,
+        capture_dir.display()
+    );
+    let capture = load_capture(&capture_dir)?;
+
+    let t = Instant::now();
+    let initial = initial_weights(&capture)?;
+    timings.push(("bone heat (initial weights)", t.elapsed().as_secs_f64()));
+
+    let model = out.join("model.skf");
+    let config = TrainConfig {
+        seed: args.seed,
+        iterations: args.iterations,
+        warm_start_iterations: args.warm_start,
+        ..TrainConfig::default()
+    };
+    let options = DataOptions { train_vertices: args.train_vertices, ..DataOptions::default() };
+    let t = Instant::now();
+    let skin_work = out.join("train-skinnet");
+    let loop_s = train_skinnet(&capture, &initial, config.clone(), &options, &skin_work, &model, false, !args.quiet)?;
+    timings.push(("train SkinNet (data + loop + export)", t.elapsed().as_secs_f64()));
+    let per_iteration = loop_s / (args.iterations + args.warm_start).max(1) as f64;
+
+    let static_file = out.join("static_weights.json");
+    let static_work = out.join("train-static");
+    let t = Instant::now();
+    let static_config = TrainConfig { iterations: args.static_iterations, ..config };
+    train_static(&capture, &initial, static_config, &static_work, &static_file, false, !args.quiet)?;
+    timings.push(("train the static baseline", t.elapsed().as_secs_f64()));
+
+    let t = Instant::now();
+    let methods = [
+        Skinning::Initial,
+        Skinning::Static(static_file.clone()),
+        Skinning::Skf(model.clone()),
+        Skinning::Oracle,
+        Skinning::OracleDqs,
+    ];
+    let options = EvalOptions::default();
+    let rows: Vec<EvalRow> = methods
+        .iter()
+        .map(|m| evaluate(&capture, m, &options).with_context(|| format!("evaluating `{}`", m.method_name())))
+        .collect::<anyhow::Result<_>>()?;
+    timings.push(("evaluate", t.elapsed().as_secs_f64()));
+
+    let table = rows_to_table(&rows);
+    println!("\n{table}");
+    let json_path = out.join("results.json");
+    write_atomic(&json_path, rows_to_json(&rows).as_bytes()).with_context(|| json_path.display().to_string())?;
+
+    // Plots and pictures.
+    for (work, name) in [(&skin_work, "losses_skinnet.png"), (&static_work, "losses_static.png")] {
+        let csv_path = work.join("losses.csv");
+        let csv = std::fs::read_to_string(&csv_path).with_context(|| csv_path.display().to_string())?;
+        plot_losses(&csv, &out.join(name))?;
+    }
+    let frame = *capture.test_frames.last().context("the capture has no test frames")?;
+    for (weights, kind, name) in [
+        (Skinning::Skf(model.clone()), super::render::Kind::Overlay, "overlay_ours.png"),
+        (Skinning::Skf(model.clone()), super::render::Kind::Error, "error_ours.png"),
+        (Skinning::Initial, super::render::Kind::Error, "error_initial.png"),
+        (Skinning::Static(static_file.clone()), super::render::Kind::Error, "error_static.png"),
+    ] {
+        super::render::run(super::render::Args {
+            capture: capture_dir.clone(),
+            weights,
+            kind,
+            frame: Some(frame),
+            camera: 1,
+            max_error_cm: 2.0,
+            out: out.join(name),
+        })?;
+    }
+
+    let mut md = String::new();
+    let _ = writeln!(md, "# Skinfield demo results\n");
+    let _ = writeln!(md, "Built-in capture (seed {}), {} test frames, {} surface samples per frame.\n", args.seed, capture.test_frames.len(), options.samples);
+    let _ = writeln!(md, "```\n{table}```\n");
+    let _ = writeln!(md, "| step | seconds |\n| --- | --- |");
+    for (step, s) in &timings {
+        let _ = writeln!(md, "| {step} | {s:.1} |");
+    }
+    let _ = writeln!(md, "\nSkinNet: {} warm-start + {} image iterations at {} training vertices, {:.3} s per iteration on average.", args.warm_start, args.iterations, args.train_vertices, per_iteration);
+    let _ = writeln!(md, "Total: {:.1} s.", total.elapsed().as_secs_f64());
+    let md_path = out.join("results.md");
+    write_atomic(&md_path, md.as_bytes()).with_context(|| md_path.display().to_string())?;
+    for (step, s) in &timings {
+        println!("{step:40} {s:8.1} s");
+    }
+    println!("SkinNet: {per_iteration:.3} s per iteration; total {:.1} s; results in {}", total.elapsed().as_secs_f64(), out.display());
+    Ok(())
+}

@@ -1,0 +1,126 @@
+//! `trainer train`: stage 1 (SkinNet from silhouettes) or the static-weights baseline.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Parser;
+use skinfield_formats::StaticSkin;
+use skinfield_formats::capture::{Capture, load_capture};
+use skinfield_trainer::eval::static_weights::write_static_weights;
+use skinfield_trainer::skinnet::export::write_skf;
+use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
+use skinfield_trainer::train::{TrainConfig, Trainer};
+
+/// Arguments of `trainer train`.
+#[derive(Parser, Debug)]
+pub struct Args {
+    /// Capture folder (manifest.json inside).
+    #[arg(long)]
+    pub capture: PathBuf,
+    /// Output: a `.skf` model, or with `--static` a static-weights JSON file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Train the static-weights baseline (one pose-independent weight set) instead of SkinNet.
+    #[arg(long = "static")]
+    pub static_weights: bool,
+    /// Training configuration (JSON, `TrainConfig` fields; missing fields take the defaults).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Folder for losses.csv and checkpoints (default: beside `--out`).
+    #[arg(long)]
+    pub work: Option<PathBuf>,
+    /// Continue from the checkpoint in the work folder.
+    #[arg(long)]
+    pub resume: bool,
+    /// Training-template vertex count for SkinNet (0 = full resolution).
+    #[arg(long, default_value_t = DataOptions::default().train_vertices)]
+    pub train_vertices: usize,
+    /// Hide the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Runs `trainer train`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let capture = load_capture(&args.capture).with_context(|| format!("loading the capture {}", args.capture.display()))?;
+    let config = match &args.config {
+        Some(path) => TrainConfig::load(path)?,
+        None => TrainConfig::default(),
+    };
+    let work = args.work.clone().unwrap_or_else(|| default_work_dir(&args.out));
+    let initial = initial_weights(&capture)?;
+    let options = DataOptions { train_vertices: args.train_vertices, ..DataOptions::default() };
+    let seconds = if args.static_weights {
+        train_static(&capture, &initial, config, &work, &args.out, args.resume, !args.quiet)?
+    } else {
+        train_skinnet(&capture, &initial, config, &options, &work, &args.out, args.resume, !args.quiet)?
+    };
+    println!("wrote {} ({seconds:.1} s of training; losses in {})", args.out.display(), work.join("losses.csv").display());
+    Ok(())
+}
+
+/// `OUT` → `OUT.work/` beside it.
+#[must_use]
+pub fn default_work_dir(out: &Path) -> PathBuf {
+    let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(".work");
+    out.with_file_name(name)
+}
+
+/// Trains SkinNet on the capture's training frames and writes the `.skf`; returns the seconds
+/// spent in the optimisation loop.
+#[allow(clippy::too_many_arguments)]
+pub fn train_skinnet(
+    capture: &Capture,
+    initial: &StaticSkin,
+    config: TrainConfig,
+    options: &DataOptions,
+    work: &Path,
+    out: &Path,
+    resume: bool,
+    progress: bool,
+) -> anyhow::Result<f64> {
+    let data = train_data(capture, initial, options)?;
+    let skeleton = data.skeleton.clone();
+    let mut trainer = Trainer::new(data, config, false)?;
+    if resume {
+        trainer.resume(&work.join("checkpoint.safetensors"))?;
+    }
+    let start = Instant::now();
+    trainer.run(work, progress)?;
+    let seconds = start.elapsed().as_secs_f64();
+    let net = trainer.net().context("the trainer holds no network")?;
+    write_skf(net, &skeleton, out)?;
+    Ok(seconds)
+}
+
+/// Trains the static baseline at full template resolution (it has one weight set per vertex, so
+/// it cannot be evaluated at another resolution) and writes the static-weights file.
+pub fn train_static(
+    capture: &Capture,
+    initial: &StaticSkin,
+    mut config: TrainConfig,
+    work: &Path,
+    out: &Path,
+    resume: bool,
+    progress: bool,
+) -> anyhow::Result<f64> {
+    // The logits start at the initial weights: regressing them first would be a no-op.
+    config.warm_start_iterations = 0;
+    let options = DataOptions { train_vertices: 0, ..DataOptions::default() };
+    let data = train_data(capture, initial, &options)?;
+    let skeleton = data.skeleton.clone();
+    let joints = skeleton.len();
+    let mut trainer = Trainer::new(data, config, true)?;
+    if resume {
+        trainer.resume(&work.join("checkpoint.safetensors"))?;
+    }
+    let start = Instant::now();
+    trainer.run(work, progress)?;
+    let seconds = start.elapsed().as_secs_f64();
+    let dense = trainer.static_weights()?.context("the trainer holds no static weights")?;
+    let skin = StaticSkin::from_dense(&dense, joints)?;
+    write_static_weights(out, &skeleton, &skin)?;
+    Ok(seconds)
+}

@@ -1,0 +1,166 @@
+//! Loading a capture folder into [`TrainData`]: initial weights, the training-resolution
+//! template, and per training frame the skinning matrices, pose features and silhouette targets.
+//!
+//! SkinNet is a field over canonical space, so it is trained on a simplified template (the
+//! default keeps about 2,500 of the built-in capture's 10k vertices: one iteration then costs a
+//! quarter as much) and evaluated at full resolution. The simplified template keeps a *subset*
+//! of the original vertices (meshoptimizer's edge-collapse simplifier only removes vertices), so
+//! initial weights and part labels carry over exactly, without interpolation.
+//!
+//! Only training frames are read; the capture's evaluation-only ground truth is never touched.
+
+use glam::Mat4;
+use skinfield_formats::capture::{Capture, CaptureError};
+use skinfield_formats::mesh::area_weighted_normals;
+use skinfield_formats::{StaticSkin, Template, pose_features};
+
+use super::{Frame, TrainData, View};
+use crate::losses::silhouette::SilhouetteTarget;
+
+/// How a capture is turned into training data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DataOptions {
+    /// Vertex count of the training template (about; `0` keeps the full template).
+    pub train_vertices: usize,
+    /// Use only the first `cameras` cameras (`0` = all).
+    pub cameras: usize,
+}
+
+impl Default for DataOptions {
+    fn default() -> Self {
+        Self { train_vertices: 2500, cameras: 0 }
+    }
+}
+
+/// Why a capture could not be turned into training data.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// A capture file is missing or malformed.
+    #[error(transparent)]
+    Capture(#[from] CaptureError),
+    /// The initial weights could not be computed.
+    #[error("bone heat on the capture's template: {0}")]
+    Heat(#[from] crate::heat::HeatError),
+    /// The data do not fit together (names the field).
+    #[error("{0}")]
+    Inconsistent(String),
+}
+
+/// The capture's initial weights, or bone heat (default options) on its template when it ships
+/// none — the same weights `trainer eval --weights initial` scores.
+pub fn initial_weights(capture: &Capture) -> Result<StaticSkin, DataError> {
+    match &capture.initial_weights {
+        Some(skin) => Ok(skin.clone()),
+        None => Ok(crate::heat::bone_heat(&capture.template, &capture.skeleton, &crate::heat::HeatOptions::default())?.skin),
+    }
+}
+
+/// Simplifies `template` to about `target` vertices; returns the new template and, for each of
+/// its vertices, the index of the original vertex it is.
+#[must_use]
+pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u32>) {
+    let n = template.vertex_count();
+    if target == 0 || target >= n {
+        return (template.clone(), (0..n as u32).collect());
+    }
+    let indices: Vec<u32> = template.triangles.iter().flatten().copied().collect();
+    let bytes: Vec<u8> = template.positions.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect();
+    // 12-byte stride with the position at offset 0 always fits the adapter.
+    let Ok(adapter) = meshopt::VertexDataAdapter::new(&bytes, 12, 0) else {
+        return (template.clone(), (0..n as u32).collect());
+    };
+    // A closed surface has about twice as many triangles as vertices.
+    let target_indices = (target * 6).min(indices.len());
+    let simplified = meshopt::simplify(&indices, &adapter, target_indices, 0.05, meshopt::SimplifyOptions::None, None);
+    let mut remap = vec![u32::MAX; n];
+    let mut source = Vec::new();
+    let mut triangles = Vec::new();
+    for t in simplified.chunks_exact(3) {
+        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            continue;
+        }
+        triangles.push([t[0], t[1], t[2]].map(|i| {
+            if remap[i as usize] == u32::MAX {
+                remap[i as usize] = source.len() as u32;
+                source.push(i);
+            }
+            remap[i as usize]
+        }));
+    }
+    let pick = |v: &Vec<_>| source.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
+    let positions = pick(&template.positions);
+    let reduced = Template {
+        normals: area_weighted_normals(&positions, &triangles),
+        positions,
+        triangles,
+        uvs: template.uvs.as_ref().map(pick),
+        colors: template.colors.as_ref().map(pick),
+        part_labels: template.part_labels.as_ref().map(pick),
+    };
+    (reduced, source)
+}
+
+/// Builds the stage-1 training data from `capture`'s training frames.
+pub fn train_data(capture: &Capture, initial: &StaticSkin, options: &DataOptions) -> Result<TrainData, DataError> {
+    let skeleton = capture.skeleton.clone();
+    let j = skeleton.len();
+    if initial.vertex_count() != capture.template.vertex_count() || initial.joint_count() != j {
+        return Err(DataError::Inconsistent(format!(
+            "initial weights are {} vertices × {} joints, the template has {} vertices and the skeleton {j} joints",
+            initial.vertex_count(),
+            initial.joint_count(),
+            capture.template.vertex_count()
+        )));
+    }
+    let (template, source) = simplify_template(&capture.template, options.train_vertices);
+    let dense = initial.to_dense();
+    let init_weights = source.iter().flat_map(|&v| dense[v as usize * j..(v as usize + 1) * j].iter().copied()).collect();
+    let cameras = match options.cameras {
+        0 => capture.rig.cameras.len(),
+        c => c.min(capture.rig.cameras.len()),
+    };
+    let mut frames = Vec::with_capacity(capture.train_frames.len());
+    for &f in &capture.train_frames {
+        let pose = &capture.poses[f];
+        let mut skinning = vec![Mat4::IDENTITY; j];
+        skeleton
+            .skinning_matrices(pose, &mut skinning)
+            .map_err(|e| DataError::Inconsistent(format!("motion frame {f}: {e}")))?;
+        let mut features = vec![0.0; 3 * j];
+        pose_features(&skeleton, pose, capture.up_axis, &mut features)
+            .map_err(|e| DataError::Inconsistent(format!("motion frame {f}: {e}")))?;
+        let mut views = Vec::with_capacity(cameras);
+        for (c, camera) in capture.rig.cameras.iter().take(cameras).enumerate() {
+            let mask = capture.load_mask(c, f)?;
+            let target = SilhouetteTarget::from_mask(mask.width as usize, mask.height as usize, &mask.inside).map_err(|e| {
+                DataError::Inconsistent(format!("{}: {e}", capture.mask_path(c, f).display()))
+            })?;
+            views.push(View { camera: camera.clone(), target });
+        }
+        frames.push(Frame { skinning, pose_features: features, views });
+    }
+    Ok(TrainData { skeleton, template, init_weights, frames })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn simplified_template_is_a_subset_with_its_attributes() {
+        let cfg = crate::synth::SynthConfig::tiny();
+        let character = crate::synth::build_character(&cfg).unwrap();
+        let t = &character.template;
+        let (r, source) = simplify_template(t, t.vertex_count() / 3);
+        r.validate().unwrap();
+        assert!(r.vertex_count() < t.vertex_count() / 2, "{} of {}", r.vertex_count(), t.vertex_count());
+        assert_eq!(source.len(), r.vertex_count());
+        for (k, &s) in source.iter().enumerate() {
+            assert_eq!(r.positions[k], t.positions[s as usize]);
+            assert_eq!(r.part_labels.as_ref().unwrap()[k], t.part_labels.as_ref().unwrap()[s as usize]);
+        }
+        let (same, identity) = simplify_template(t, 0);
+        assert_eq!(same, *t);
+        assert_eq!(identity.len(), t.vertex_count());
+    }
+}
