@@ -1,1 +1,4 @@
 //! x
+
+#[cfg(feature = "gpu")]
+pub mod gpu;
