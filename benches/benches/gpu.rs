@@ -25,23 +25,36 @@ fn vertex_counts() -> Vec<usize> {
 }
 
 fn bench_gpu(c: &mut Criterion) {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let Ok(adapter) = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default())) else {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let Ok(adapter) =
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+    else {
         eprintln!("skipping GPU bench: no wgpu adapter (install mesa-vulkan-drivers for lavapipe)");
         return;
     };
     let info = adapter.get_info();
-    eprintln!("GPU bench on {} ({:?}, {:?})", info.name, info.device_type, info.backend);
-    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).unwrap();
+    eprintln!(
+        "GPU bench on {} ({:?}, {:?})",
+        info.name, info.device_type, info.backend
+    );
+    let (device, queue) =
+        pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).unwrap();
 
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let joints: usize = 24;
     let config = ModelConfig::vinecs(joints as u32, [-1.0; 3], [1.0; 3]);
     let names = (0..joints).map(|j| format!("j{j}")).collect();
     let parents = (0..joints).map(|j| j.checked_sub(1)).collect();
-    let bind = (0..joints).map(|_| Transform::from_translation(Vec3::new(0.0, 0.1, 0.0))).collect();
+    let bind = (0..joints)
+        .map(|_| Transform::from_translation(Vec3::new(0.0, 0.1, 0.0)))
+        .collect();
     let skeleton = Skeleton::new(names, parents, bind, None, None, Mat4::IDENTITY).unwrap();
-    let mut model = SkfModel { config, skeleton: skeleton.clone(), tensors: Vec::new() };
+    let mut model = SkfModel {
+        config,
+        skeleton: skeleton.clone(),
+        tensors: Vec::new(),
+    };
     for (l, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
         let s = 2.0 / (inp as f32).sqrt();
         let w = (0..out * inp).map(|_| rng.random_range(-s..s)).collect();
@@ -51,7 +64,13 @@ fn bench_gpu(c: &mut Criterion) {
     let view = SkfView::parse(&bytes).unwrap();
     let skinner = GpuSkinner::new(&device).unwrap();
     let gpu_model = skinner.bind_model(&device, &view).unwrap();
-    let pose = skeleton.pose_from_angles(glam::Quat::from_rotation_y(0.3), Vec3::ZERO, &vec![0.2; skeleton.angle_count()]).unwrap();
+    let pose = skeleton
+        .pose_from_angles(
+            glam::Quat::from_rotation_y(0.3),
+            Vec3::ZERO,
+            &vec![0.2; skeleton.angle_count()],
+        )
+        .unwrap();
     let mut features = vec![0.0; pose_feature_count(joints)];
     pose_features(&skeleton, &pose, UpAxis::Y, &mut features).unwrap();
     let mut mats = vec![Mat4::IDENTITY; joints];
@@ -60,10 +79,19 @@ fn bench_gpu(c: &mut Criterion) {
     let mut group = c.benchmark_group("gpu_skinnet_lbs");
     group.sample_size(10);
     for n in vertex_counts() {
-        let positions: Vec<Vec3> =
-            (0..n).map(|_| Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))).collect();
+        let positions: Vec<Vec3> = (0..n)
+            .map(|_| {
+                Vec3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                )
+            })
+            .collect();
         let normals = vec![Vec3::Y; n];
-        let mesh = skinner.bind_mesh(&device, &queue, &gpu_model, &positions, &normals).unwrap();
+        let mesh = skinner
+            .bind_mesh(&device, &queue, &gpu_model, &positions, &normals)
+            .unwrap();
         device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
         group.throughput(Throughput::Elements(n as u64));
         group.bench_function(BenchmarkId::new("frame", n), |b| {
@@ -71,7 +99,9 @@ fn bench_gpu(c: &mut Criterion) {
                 let mut total = Duration::ZERO;
                 for _ in 0..iters {
                     let start = Instant::now();
-                    skinner.skin(&device, &queue, &mesh, &mats, &features, Skinning::Linear).unwrap();
+                    skinner
+                        .skin(&device, &queue, &mesh, &mats, &features, Skinning::Linear)
+                        .unwrap();
                     device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
                     total += start.elapsed();
                 }

@@ -13,6 +13,8 @@
 extern crate alloc;
 
 pub mod camera;
+#[cfg(feature = "std")]
+pub mod gltf_io;
 pub mod math;
 pub mod mesh;
 pub mod pose;

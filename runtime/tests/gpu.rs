@@ -15,23 +15,39 @@ const TOL: f64 = 1e-4;
 
 /// A device (and whether its adapter runs `unpack2x16float`), or `None` to skip.
 fn device_with(limits: wgpu::Limits) -> Option<(wgpu::Device, wgpu::Queue, bool)> {
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let adapter = match pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default())) {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = match pollster::block_on(
+        instance.request_adapter(&wgpu::RequestAdapterOptions::default()),
+    ) {
         Ok(a) => a,
         Err(e) => {
             assert!(
                 std::env::var("CI").as_deref() != Ok("true"),
                 "CI=true but no wgpu adapter ({e}): install mesa-vulkan-drivers (lavapipe)"
             );
-            eprintln!("skipping GPU test: no wgpu adapter ({e}); install mesa-vulkan-drivers for lavapipe");
+            eprintln!(
+                "skipping GPU test: no wgpu adapter ({e}); install mesa-vulkan-drivers for lavapipe"
+            );
             return None;
         }
     };
     let info = adapter.get_info();
-    eprintln!("GPU tests on {} ({:?}, {:?})", info.name, info.device_type, info.backend);
-    let desc = wgpu::DeviceDescriptor { label: Some("skinfield test"), required_limits: limits, ..Default::default() };
-    let (device, queue) = pollster::block_on(adapter.request_device(&desc)).expect("request_device");
-    let unpack = adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::SHADER_F16_IN_F32);
+    eprintln!(
+        "GPU tests on {} ({:?}, {:?})",
+        info.name, info.device_type, info.backend
+    );
+    let desc = wgpu::DeviceDescriptor {
+        label: Some("skinfield test"),
+        required_limits: limits,
+        ..Default::default()
+    };
+    let (device, queue) =
+        pollster::block_on(adapter.request_device(&desc)).expect("request_device");
+    let unpack = adapter
+        .get_downlevel_capabilities()
+        .flags
+        .contains(wgpu::DownlevelFlags::SHADER_F16_IN_F32);
     Some((device, queue, unpack))
 }
 
@@ -42,17 +58,36 @@ fn device() -> Option<(wgpu::Device, wgpu::Queue, bool)> {
 /// A random tree skeleton with bind transforms and a random pose of it.
 fn skeleton_and_pose(joints: usize, rng: &mut ChaCha8Rng) -> (Skeleton, Pose) {
     let names = (0..joints).map(|j| format!("j{j}")).collect();
-    let parents: Vec<Option<usize>> = (0..joints).map(|j| if j == 0 { None } else { Some(rng.random_range(0..j)) }).collect();
+    let parents: Vec<Option<usize>> = (0..joints)
+        .map(|j| {
+            if j == 0 {
+                None
+            } else {
+                Some(rng.random_range(0..j))
+            }
+        })
+        .collect();
     let rot = |rng: &mut ChaCha8Rng, a: f32| {
-        let axis = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
-        Quat::from_axis_angle(axis.try_normalize().unwrap_or(Vec3::Y), rng.random_range(-a..a))
+        let axis = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        Quat::from_axis_angle(
+            axis.try_normalize().unwrap_or(Vec3::Y),
+            rng.random_range(-a..a),
+        )
     };
     let bind: Vec<Transform> = (0..joints)
         .map(|j| {
             let t = if j == 0 {
                 Vec3::new(0.0, 0.1, 0.0)
             } else {
-                Vec3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3))
+                Vec3::new(
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                )
             };
             Transform::from_rotation_translation(rot(rng, 0.5), t)
         })
@@ -79,11 +114,17 @@ fn skeleton_and_pose(joints: usize, rng: &mut ChaCha8Rng) -> (Skeleton, Pose) {
 fn random_model(config: ModelConfig, seed: u64) -> (Vec<u8>, Skeleton, Pose) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (skeleton, pose) = skeleton_and_pose(config.joint_count as usize, &mut rng);
-    let mut model = SkfModel { config, skeleton: skeleton.clone(), tensors: Vec::new() };
+    let mut model = SkfModel {
+        config,
+        skeleton: skeleton.clone(),
+        tensors: Vec::new(),
+    };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (l, &(out, inp)) in shapes.iter().enumerate() {
         let scale = 2.0 / (inp as f32).sqrt();
-        let w = (0..out * inp).map(|_| rng.random_range(-scale..scale)).collect();
+        let w = (0..out * inp)
+            .map(|_| rng.random_range(-scale..scale))
+            .collect();
         let b = (0..out).map(|_| rng.random_range(-0.3..0.3)).collect();
         model.push_layer(Net::Skin, l, w, out, inp, b);
     }
@@ -104,7 +145,11 @@ fn random_mesh(config: &ModelConfig, n: usize, seed: u64) -> (Vec<Vec3>, Vec<Vec
         .collect();
     let normals = (0..n)
         .map(|_| {
-            let v = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let v = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
             v.try_normalize().unwrap_or(Vec3::Z)
         })
         .collect();
@@ -129,8 +174,17 @@ impl Reference {
             .map(|l| {
                 let (w, b) = view.layer(Net::Skin, l).unwrap();
                 let (out, inp) = (w.dims[0] as usize, w.dims[1] as usize);
-                let rows = (0..out).map(|o| (0..inp).map(|i| f64::from(w.get(o * inp + i).unwrap())).collect()).collect();
-                (rows, (0..out).map(|o| f64::from(b.get(o).unwrap())).collect())
+                let rows = (0..out)
+                    .map(|o| {
+                        (0..inp)
+                            .map(|i| f64::from(w.get(o * inp + i).unwrap()))
+                            .collect()
+                    })
+                    .collect();
+                (
+                    rows,
+                    (0..out).map(|o| f64::from(b.get(o).unwrap())).collect(),
+                )
             })
             .collect();
         Self { config, layers }
@@ -156,8 +210,11 @@ impl Reference {
         let beta = f64::from(c.softplus_beta);
         let mut h = input.clone();
         for (l, (w, b)) in self.layers.iter().enumerate() {
-            let x_in: Vec<f64> =
-                if l == c.skip_layer as usize && l > 0 { h.iter().chain(&input).copied().collect() } else { h };
+            let x_in: Vec<f64> = if l == c.skip_layer as usize && l > 0 {
+                h.iter().chain(&input).copied().collect()
+            } else {
+                h
+            };
             h = w
                 .iter()
                 .zip(b)
@@ -176,10 +233,16 @@ impl Reference {
 }
 
 fn lbs(w: &[f64], mats: &[DMat4], p: DVec3, n: DVec3) -> (DVec3, DVec3) {
-    let m = w.iter().zip(mats).fold(DMat4::ZERO, |acc, (&w, m)| acc + *m * w);
+    let m = w
+        .iter()
+        .zip(mats)
+        .fold(DMat4::ZERO, |acc, (&w, m)| acc + *m * w);
     // Normals follow the transformed triangles: det(M) · M⁻ᵀ (the kernel uses cross products).
     let m3 = DMat3::from_mat4(m);
-    (m.transform_point3(p), (m3.inverse().transpose() * m3.determinant() * n).normalize())
+    (
+        m.transform_point3(p),
+        (m3.inverse().transpose() * m3.determinant() * n).normalize(),
+    )
 }
 
 fn dqs(w: &[f64], mats: &[DMat4], p: DVec3, n: DVec3) -> (DVec3, DVec3) {
@@ -192,9 +255,16 @@ fn dqs(w: &[f64], mats: &[DMat4], p: DVec3, n: DVec3) -> (DVec3, DVec3) {
         })
         .collect();
     let pivot = (0..w.len()).fold(0, |best, j| if w[j] > w[best] { j } else { best });
-    let (mut br, mut bd) = (DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0), DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0));
+    let (mut br, mut bd) = (
+        DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+        DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0),
+    );
     for (j, (r, d)) in dq.iter().enumerate() {
-        let s = if r.dot(dq[pivot].0) < 0.0 { -w[j] } else { w[j] };
+        let s = if r.dot(dq[pivot].0) < 0.0 {
+            -w[j]
+        } else {
+            w[j]
+        };
         br = br + *r * s;
         bd = bd + *d * s;
     }
@@ -206,7 +276,10 @@ fn dqs(w: &[f64], mats: &[DMat4], p: DVec3, n: DVec3) -> (DVec3, DVec3) {
 
 fn close(what: &str, v: usize, gpu: &[f32], cpu: &[f64]) {
     for (k, (&g, &c)) in gpu.iter().zip(cpu).enumerate() {
-        assert!((f64::from(g) - c).abs() <= TOL, "{what} of vertex {v}[{k}]: GPU {g} vs CPU {c}");
+        assert!(
+            (f64::from(g) - c).abs() <= TOL,
+            "{what} of vertex {v}[{k}]: GPU {g} vs CPU {c}"
+        );
     }
 }
 
@@ -231,13 +304,23 @@ fn check_model(
     let dmats: Vec<DMat4> = mats.iter().map(Mat4::as_dmat4).collect();
     for (i, &n) in sizes.iter().enumerate() {
         let (positions, normals) = random_mesh(&config, n, seed + 100 + i as u64);
-        let mesh = skinner.bind_mesh(device, queue, &model, &positions, &normals).unwrap();
-        let reference: Vec<Vec<f64>> = positions.iter().map(|&p| net.weights(p, &features)).collect();
+        let mesh = skinner
+            .bind_mesh(device, queue, &model, &positions, &normals)
+            .unwrap();
+        let reference: Vec<Vec<f64>> = positions
+            .iter()
+            .map(|&p| net.weights(p, &features))
+            .collect();
         for mode in [Skinning::Linear, Skinning::DualQuaternion] {
-            skinner.skin(device, queue, &mesh, &mats, &features, mode).unwrap();
+            skinner
+                .skin(device, queue, &mesh, &mats, &features, mode)
+                .unwrap();
             let weights = mesh.read_weights(device, queue).unwrap();
             let out: Vec<SkinnedVertex> = mesh.read_vertices(device, queue).unwrap();
-            assert_eq!((weights.len(), out.len()), (n * config.joint_count as usize, n));
+            assert_eq!(
+                (weights.len(), out.len()),
+                (n * config.joint_count as usize, n)
+            );
             for v in 0..n {
                 let w = &reference[v];
                 close("weights", v, &weights[v * w.len()..(v + 1) * w.len()], w);
@@ -246,8 +329,18 @@ fn check_model(
                     Skinning::Linear => lbs(w, &dmats, p, nrm),
                     Skinning::DualQuaternion => dqs(w, &dmats, p, nrm),
                 };
-                close(&format!("{mode:?} position"), v, &out[v].position, &[cp.x, cp.y, cp.z, 1.0]);
-                close(&format!("{mode:?} normal"), v, &out[v].normal, &[cn.x, cn.y, cn.z, 0.0]);
+                close(
+                    &format!("{mode:?} position"),
+                    v,
+                    &out[v].position,
+                    &[cp.x, cp.y, cp.z, 1.0],
+                );
+                close(
+                    &format!("{mode:?} normal"),
+                    v,
+                    &out[v].normal,
+                    &[cn.x, cn.y, cn.z, 0.0],
+                );
             }
         }
     }
@@ -265,9 +358,18 @@ fn small_config() -> ModelConfig {
 
 #[test]
 fn small_model_matches_cpu_reference_at_tile_boundaries() {
-    let Some((device, queue, unpack)) = device() else { return };
+    let Some((device, queue, unpack)) = device() else {
+        return;
+    };
     let skinner = GpuSkinner::new(&device).unwrap();
-    check_model((&device, &queue), &skinner, small_config(), &[1, 63, 64, 65], None, 1);
+    check_model(
+        (&device, &queue),
+        &skinner,
+        small_config(),
+        &[1, 63, 64, 65],
+        None,
+        1,
+    );
     if unpack {
         let skinner = GpuSkinner::with_unpack2x16float(&device, true).unwrap();
         check_model((&device, &queue), &skinner, small_config(), &[65], None, 1);
@@ -278,20 +380,38 @@ fn small_model_matches_cpu_reference_at_tile_boundaries() {
 
 #[test]
 fn f32_weight_storage_and_no_skip_model_match() {
-    let Some((device, queue, _)) = device() else { return };
+    let Some((device, queue, _)) = device() else {
+        return;
+    };
     let skinner = GpuSkinner::new(&device).unwrap();
     let mut c = ModelConfig::vinecs(7, [-1.0; 3], [1.0; 3]);
     c.pe_frequencies = 3;
     c.hidden_count = 3;
     c.hidden = [33, 64, 17, 0, 0, 0, 0, 0];
     c.skip_layer = 0;
-    check_model((&device, &queue), &skinner, c, &[17, 40], Some(WeightFormat::F32), 2);
-    check_model((&device, &queue), &skinner, c, &[17], Some(WeightFormat::F16), 2);
+    check_model(
+        (&device, &queue),
+        &skinner,
+        c,
+        &[17, 40],
+        Some(WeightFormat::F32),
+        2,
+    );
+    check_model(
+        (&device, &queue),
+        &skinner,
+        c,
+        &[17],
+        Some(WeightFormat::F16),
+        2,
+    );
 }
 
 #[test]
 fn paper_architecture_matches_cpu_reference() {
-    let Some((device, queue, _)) = device() else { return };
+    let Some((device, queue, _)) = device() else {
+        return;
+    };
     let skinner = GpuSkinner::new(&device).unwrap();
     let c = ModelConfig::vinecs(24, [-0.9, -1.0, -0.3], [0.9, 0.8, 0.35]);
     check_model((&device, &queue), &skinner, c, &[65, 2000], None, 3);
@@ -302,43 +422,82 @@ fn dispatches_split_in_2d_beyond_the_per_dimension_limit() {
     // A device limited to 16 workgroups per dimension forces the big dispatches of this test
     // into two dimensions (300 vertices: 99 position-term groups → 16 × 7, 19 SkinNet tiles
     // → 16 × 2).
-    let limits = wgpu::Limits { max_compute_workgroups_per_dimension: 16, ..wgpu::Limits::default() };
-    let Some((device, queue, _)) = device_with(limits) else { return };
+    let limits = wgpu::Limits {
+        max_compute_workgroups_per_dimension: 16,
+        ..wgpu::Limits::default()
+    };
+    let Some((device, queue, _)) = device_with(limits) else {
+        return;
+    };
     let skinner = GpuSkinner::new(&device).unwrap();
     check_model((&device, &queue), &skinner, small_config(), &[300], None, 4);
 }
 
 #[test]
 fn bad_inputs_are_typed_errors() {
-    let Some((device, queue, _)) = device() else { return };
+    let Some((device, queue, _)) = device() else {
+        return;
+    };
     let skinner = GpuSkinner::new(&device).unwrap();
     let mut wide = small_config();
     wide.hidden[1] = 300;
     let (bytes, _, _) = random_model(wide, 5);
-    let err = skinner.bind_model(&device, &SkfView::parse(&bytes).unwrap()).err().unwrap();
-    assert!(matches!(err, GpuError::Unsupported { what: "hidden width", value: 300, max: 256 }), "{err}");
+    let err = skinner
+        .bind_model(&device, &SkfView::parse(&bytes).unwrap())
+        .err()
+        .unwrap();
+    assert!(
+        matches!(
+            err,
+            GpuError::Unsupported {
+                what: "hidden width",
+                value: 300,
+                max: 256
+            }
+        ),
+        "{err}"
+    );
 
     let (bytes, skeleton, _) = random_model(small_config(), 6);
     let view = SkfView::parse(&bytes).unwrap();
     let model = skinner.bind_model(&device, &view).unwrap();
-    assert!(matches!(skinner.bind_mesh(&device, &queue, &model, &[], &[]), Err(GpuError::EmptyMesh)));
+    assert!(matches!(
+        skinner.bind_mesh(&device, &queue, &model, &[], &[]),
+        Err(GpuError::EmptyMesh)
+    ));
     let p = [Vec3::ZERO, Vec3::ONE];
     assert!(matches!(
         skinner.bind_mesh(&device, &queue, &model, &p, &p[..1]),
-        Err(GpuError::Length { field: "normals", len: 1, expected: 2 })
+        Err(GpuError::Length {
+            field: "normals",
+            len: 1,
+            expected: 2
+        })
     ));
     let bad = [Vec3::ZERO, Vec3::new(0.0, f32::NAN, 0.0)];
     assert!(matches!(
         skinner.bind_mesh(&device, &queue, &model, &bad, &p),
-        Err(GpuError::NonFinite { field: "positions", index: 1 })
+        Err(GpuError::NonFinite {
+            field: "positions",
+            index: 1
+        })
     ));
     let mesh = skinner.bind_mesh(&device, &queue, &model, &p, &p).unwrap();
     let mats = vec![Mat4::IDENTITY; skeleton.len()];
     let feats = vec![0.0; pose_feature_count(skeleton.len())];
     assert!(matches!(
         skinner.upload_frame(&queue, &mesh, &mats[1..], &feats),
-        Err(GpuError::Length { field: "skinning matrices", .. })
+        Err(GpuError::Length {
+            field: "skinning matrices",
+            ..
+        })
     ));
-    assert!(matches!(skinner.upload_frame(&queue, &mesh, &mats, &feats[1..]), Err(GpuError::Length { field: "pose features", .. })));
+    assert!(matches!(
+        skinner.upload_frame(&queue, &mesh, &mats, &feats[1..]),
+        Err(GpuError::Length {
+            field: "pose features",
+            ..
+        })
+    ));
     skinner.upload_frame(&queue, &mesh, &mats, &feats).unwrap();
 }

@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Print the version.
     Version,
+    /// Describe a glTF/GLB or .skf file as one JSON object.
+    Inspect(cli::inspect::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -28,6 +30,7 @@ fn main() {
             println!("{}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Inspect(args) => cli::inspect::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

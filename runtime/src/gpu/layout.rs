@@ -81,7 +81,8 @@ pub struct SkinnedVertex {
 impl SkinnedVertex {
     /// Vertex attributes for a render pipeline reading the output buffer: position at shader
     /// location 0, normal at 1.
-    pub const ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4];
+    pub const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
+        wgpu::vertex_attr_array![0 => Float32x4, 1 => Float32x4];
 
     /// Vertex-buffer layout of the output buffer for a render pipeline.
     #[must_use]
@@ -133,7 +134,14 @@ pub(crate) mod entry {
     pub const SKIN_LBS: &str = "skin_lbs";
     pub const SKIN_DQS: &str = "skin_dqs";
     #[cfg(test)]
-    pub const ALL: [&str; 6] = [POSITION_TERMS, POSE_TERMS, JOINT_DQS, SKINNET, SKIN_LBS, SKIN_DQS];
+    pub const ALL: [&str; 6] = [
+        POSITION_TERMS,
+        POSE_TERMS,
+        JOINT_DQS,
+        SKINNET,
+        SKIN_LBS,
+        SKIN_DQS,
+    ];
 }
 
 #[cfg(test)]
@@ -146,7 +154,8 @@ mod tests {
 
     fn module_with(format: WeightFormat, unpack: bool) -> naga::Module {
         let src = shader_source(format, unpack);
-        let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
+        let module = naga::front::wgsl::parse_str(&src)
+            .unwrap_or_else(|e| panic!("{}", e.emit_to_string(&src)));
         // Only the unpack2x16float variant may need a capability beyond the baseline.
         let caps = if unpack {
             naga::valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32
@@ -171,26 +180,44 @@ mod tests {
         module_with(WeightFormat::F16, true);
         let src = shader_source(WeightFormat::F16, true);
         let m = naga::front::wgsl::parse_str(&src).unwrap();
-        let err = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-            .validate(&m)
-            .err();
-        assert!(err.is_some(), "unpack2x16float validated without SHADER_FLOAT16_IN_FLOAT32");
+        let err = naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::empty(),
+        )
+        .validate(&m)
+        .err();
+        assert!(
+            err.is_some(),
+            "unpack2x16float validated without SHADER_FLOAT16_IN_FLOAT32"
+        );
     }
 
     /// (size, [(member name, offset)]) of the WGSL struct `name` per naga's layouter.
     fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
         let mut layouter = naga::proc::Layouter::default();
         layouter.update(module.to_ctx()).unwrap();
-        let (handle, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).unwrap();
-        let naga::TypeInner::Struct { members, .. } = &ty.inner else { panic!("{name} is not a struct") };
-        let fields = members.iter().map(|m| (m.name.clone().unwrap(), m.offset)).collect();
+        let (handle, ty) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap();
+        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+            panic!("{name} is not a struct")
+        };
+        let fields = members
+            .iter()
+            .map(|m| (m.name.clone().unwrap(), m.offset))
+            .collect();
         (layouter[handle].size, fields)
     }
 
     fn check(module: &naga::Module, name: &str, size: usize, rust: &[(&str, usize)]) {
         let (wgsl_size, wgsl) = wgsl_layout(module, name);
         assert_eq!(wgsl_size as usize, size, "size of {name}");
-        let rust: Vec<(String, u32)> = rust.iter().map(|&(n, o)| (n.to_string(), o as u32)).collect();
+        let rust: Vec<(String, u32)> = rust
+            .iter()
+            .map(|&(n, o)| (n.to_string(), o as u32))
+            .collect();
         assert_eq!(wgsl, rust, "fields of {name}");
     }
 
@@ -247,16 +274,33 @@ mod tests {
             &m,
             "Vertex",
             size_of::<SkinnedVertex>(),
-            &[("position", offset_of!(SkinnedVertex, position)), ("normal", offset_of!(SkinnedVertex, normal))],
+            &[
+                ("position", offset_of!(SkinnedVertex, position)),
+                ("normal", offset_of!(SkinnedVertex, normal)),
+            ],
         );
         // The layer table's array stride must equal the Rust element size.
-        let (handle, _) = m.types.iter().find(|(_, t)| t.name.as_deref() == Some("Params")).unwrap();
-        let naga::TypeInner::Struct { members, .. } = &m.types[handle].inner else { unreachable!() };
+        let (handle, _) = m
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some("Params"))
+            .unwrap();
+        let naga::TypeInner::Struct { members, .. } = &m.types[handle].inner else {
+            unreachable!()
+        };
         let layers_ty = &m.types[members.last().unwrap().ty].inner;
-        let naga::TypeInner::Array { stride, size: naga::ArraySize::Constant(n), .. } = layers_ty else {
+        let naga::TypeInner::Array {
+            stride,
+            size: naga::ArraySize::Constant(n),
+            ..
+        } = layers_ty
+        else {
             panic!("layers is not a fixed array")
         };
-        assert_eq!((*stride as usize, n.get() as usize), (size_of::<GpuLayer>(), MAX_GPU_LAYERS));
+        assert_eq!(
+            (*stride as usize, n.get() as usize),
+            (size_of::<GpuLayer>(), MAX_GPU_LAYERS)
+        );
     }
 
     #[test]
@@ -266,7 +310,10 @@ mod tests {
         assert!(src.contains(&format!("const TILE: u32 = {SKINNET_TILE}u;")));
         assert!(src.contains(&format!("const MAX_WIDTH: u32 = {MAX_GPU_WIDTH}u;")));
         // Workgroup memory: MAX_WIDTH rows × TILE vertices of f32 within WebGPU's default 16 KiB.
-        assert!(src.contains(&format!("array<vec4<f32>, {}>", MAX_GPU_WIDTH * SKINNET_TILE as usize / 4)));
+        assert!(src.contains(&format!(
+            "array<vec4<f32>, {}>",
+            MAX_GPU_WIDTH * SKINNET_TILE as usize / 4
+        )));
         assert!(MAX_GPU_WIDTH * SKINNET_TILE as usize * 4 <= 16384);
     }
 }

@@ -20,8 +20,8 @@ mod layout;
 mod skinner;
 
 pub use layout::{
-    GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex, WORKGROUP_THREADS, WeightFormat,
-    shader_source,
+    GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
+    WORKGROUP_THREADS, WeightFormat, shader_source,
 };
 pub use skinner::{GpuMesh, GpuModel, GpuSkinner, Skinning, position_encoding};
 

@@ -9,8 +9,8 @@ use wgpu::util::DeviceExt;
 
 use super::GpuError;
 use super::layout::{
-    GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex, WORKGROUP_THREADS, WeightFormat,
-    entry, shader_source,
+    GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
+    WORKGROUP_THREADS, WeightFormat, entry, shader_source,
 };
 
 /// Which skinning the frame uses.
@@ -66,7 +66,11 @@ pub struct GpuMesh {
     bind_dqs: wgpu::BindGroup,
 }
 
-fn pipeline(device: &wgpu::Device, module: &wgpu::ShaderModule, entry_point: &str) -> wgpu::ComputePipeline {
+fn pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    entry_point: &str,
+) -> wgpu::ComputePipeline {
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(entry_point),
         layout: None,
@@ -78,13 +82,25 @@ fn pipeline(device: &wgpu::Device, module: &wgpu::ShaderModule, entry_point: &st
 }
 
 fn require(name: &'static str, value: u64, required: u64) -> Result<(), GpuError> {
-    if value < required { Err(GpuError::DeviceLimit { name, value, required }) } else { Ok(()) }
+    if value < required {
+        Err(GpuError::DeviceLimit {
+            name,
+            value,
+            required,
+        })
+    } else {
+        Ok(())
+    }
 }
 
 /// `(x, y)` workgroups covering `groups` with each dimension ≤ `max` (the kernels rebuild the
 /// linear index as `y · x_count + x` and skip the excess).
 fn split_dispatch(groups: u32, max: u32) -> (u32, u32) {
-    if groups <= max { (groups, 1) } else { (max, groups.div_ceil(max)) }
+    if groups <= max {
+        (groups, 1)
+    } else {
+        (max, groups.div_ceil(max))
+    }
 }
 
 /// `[x̂, γ(x̂)]` of every position in f64, rounded to f32, appended to `out`: `x̂` maps the
@@ -111,7 +127,11 @@ pub fn position_encoding(config: &ModelConfig, positions: &[Vec3], out: &mut Vec
 fn check_shape(t: &TensorView<'_>, expected: [u32; 2]) -> Result<(), GpuError> {
     let found = if t.rank == 1 { [t.dims[0], 0] } else { t.dims };
     if found != expected || t.len() != expected[0] as usize * expected[1].max(1) as usize {
-        return Err(GpuError::TensorShape { name: t.name.as_str().to_string(), found, expected });
+        return Err(GpuError::TensorShape {
+            name: t.name.as_str().to_string(),
+            found,
+            expected,
+        });
     }
     Ok(())
 }
@@ -126,7 +146,12 @@ fn f16_bits(t: &TensorView<'_>, i: usize) -> u16 {
 fn f32_at(t: &TensorView<'_>, i: usize) -> f32 {
     match t.dtype {
         Dtype::F16 => f16::from_bits(f16_bits(t, i)).to_f32(),
-        Dtype::F32 => f32::from_le_bytes([t.bytes[4 * i], t.bytes[4 * i + 1], t.bytes[4 * i + 2], t.bytes[4 * i + 3]]),
+        Dtype::F32 => f32::from_le_bytes([
+            t.bytes[4 * i],
+            t.bytes[4 * i + 1],
+            t.bytes[4 * i + 2],
+            t.bytes[4 * i + 3],
+        ]),
     }
 }
 
@@ -146,17 +171,32 @@ impl GpuSkinner {
     /// As [`GpuSkinner::new`], decoding f16 weights with WGSL's `unpack2x16float` when
     /// `unpack2x16float` is true: only for devices whose adapter reports
     /// `wgpu::DownlevelFlags::SHADER_F16_IN_F32` (shader creation fails otherwise).
-    pub fn with_unpack2x16float(device: &wgpu::Device, unpack2x16float: bool) -> Result<Self, GpuError> {
+    pub fn with_unpack2x16float(
+        device: &wgpu::Device,
+        unpack2x16float: bool,
+    ) -> Result<Self, GpuError> {
         let limits = device.limits();
         let tile_bytes = (MAX_GPU_WIDTH as u64) * u64::from(SKINNET_TILE) * 4;
-        require("max_compute_workgroup_storage_size", limits.max_compute_workgroup_storage_size.into(), tile_bytes)?;
+        require(
+            "max_compute_workgroup_storage_size",
+            limits.max_compute_workgroup_storage_size.into(),
+            tile_bytes,
+        )?;
         require(
             "max_compute_invocations_per_workgroup",
             limits.max_compute_invocations_per_workgroup.into(),
             WORKGROUP_THREADS.into(),
         )?;
-        require("max_compute_workgroup_size_x", limits.max_compute_workgroup_size_x.into(), WORKGROUP_THREADS.into())?;
-        require("max_storage_buffers_per_shader_stage", limits.max_storage_buffers_per_shader_stage.into(), 6)?;
+        require(
+            "max_compute_workgroup_size_x",
+            limits.max_compute_workgroup_size_x.into(),
+            WORKGROUP_THREADS.into(),
+        )?;
+        require(
+            "max_storage_buffers_per_shader_stage",
+            limits.max_storage_buffers_per_shader_stage.into(),
+            6,
+        )?;
         let build = |format| {
             device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("skinfield"),
@@ -196,7 +236,11 @@ impl GpuSkinner {
         let limit = max * max;
         match u32::try_from(groups) {
             Ok(g) if groups <= limit => Ok(g),
-            _ => Err(GpuError::TooLarge { what, value: groups, limit }),
+            _ => Err(GpuError::TooLarge {
+                what,
+                value: groups,
+                limit,
+            }),
         }
     }
 
@@ -216,25 +260,51 @@ impl GpuSkinner {
         }))
     }
 
-    fn storage_init(&self, device: &wgpu::Device, label: &'static str, contents: &[u8]) -> Result<wgpu::Buffer, GpuError> {
+    fn storage_init(
+        &self,
+        device: &wgpu::Device,
+        label: &'static str,
+        contents: &[u8],
+    ) -> Result<wgpu::Buffer, GpuError> {
         self.check_size(label, contents.len() as u64)?;
         let pad = [0u8; 16];
-        let contents = if contents.is_empty() { &pad[..] } else { contents };
-        Ok(device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some(label),
-            contents,
-            usage: wgpu::BufferUsages::STORAGE,
-        }))
+        let contents = if contents.is_empty() {
+            &pad[..]
+        } else {
+            contents
+        };
+        Ok(
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            }),
+        )
     }
 
     fn check_size(&self, what: &'static str, bytes: u64) -> Result<(), GpuError> {
-        let limit = self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size);
-        if bytes > limit { Err(GpuError::TooLarge { what, value: bytes, limit }) } else { Ok(()) }
+        let limit = self
+            .limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size);
+        if bytes > limit {
+            Err(GpuError::TooLarge {
+                what,
+                value: bytes,
+                limit,
+            })
+        } else {
+            Ok(())
+        }
     }
 
     /// Copies SkinNet out of `view` into GPU buffers, keeping the file's precision: f16 when
     /// every SkinNet weight is stored as f16, else f32.
-    pub fn bind_model(&self, device: &wgpu::Device, view: &SkfView<'_>) -> Result<GpuModel, GpuError> {
+    pub fn bind_model(
+        &self,
+        device: &wgpu::Device,
+        view: &SkfView<'_>,
+    ) -> Result<GpuModel, GpuError> {
         self.bind_model_as(device, view, None)
     }
 
@@ -251,12 +321,20 @@ impl GpuSkinner {
         let n = hidden.len();
         for &w in hidden {
             if w as usize > MAX_GPU_WIDTH {
-                return Err(GpuError::Unsupported { what: "hidden width", value: w as usize, max: MAX_GPU_WIDTH });
+                return Err(GpuError::Unsupported {
+                    what: "hidden width",
+                    value: w as usize,
+                    max: MAX_GPU_WIDTH,
+                });
             }
         }
         let joints = config.joint_count as usize;
         if joints > MAX_GPU_WIDTH {
-            return Err(GpuError::Unsupported { what: "joint_count", value: joints, max: MAX_GPU_WIDTH });
+            return Err(GpuError::Unsupported {
+                what: "joint_count",
+                value: joints,
+                max: MAX_GPU_WIDTH,
+            });
         }
         let mut tensors = Vec::with_capacity(n + 1);
         for (l, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
@@ -265,11 +343,13 @@ impl GpuSkinner {
             check_shape(&b, [out as u32, 0])?;
             tensors.push((w, b, out, inp));
         }
-        let format = format.unwrap_or(if tensors.iter().all(|(w, _, _, _)| w.dtype == Dtype::F16) {
-            WeightFormat::F16
-        } else {
-            WeightFormat::F32
-        });
+        let format = format.unwrap_or(
+            if tensors.iter().all(|(w, _, _, _)| w.dtype == Dtype::F16) {
+                WeightFormat::F16
+            } else {
+                WeightFormat::F32
+            },
+        );
         let mut packed = match format {
             WeightFormat::F16 => Packed::Half(Vec::new()),
             WeightFormat::F32 => Packed::Single(Vec::new()),
@@ -281,7 +361,11 @@ impl GpuSkinner {
                 Packed::Half(v) => v.len(),
                 Packed::Single(v) => v.len(),
             };
-            let too_large = |value: usize| GpuError::TooLarge { what: "SkinNet weights", value: value as u64, limit: u32::MAX.into() };
+            let too_large = |value: usize| GpuError::TooLarge {
+                what: "SkinNet weights",
+                value: value as u64,
+                limit: u32::MAX.into(),
+            };
             layers[l] = GpuLayer {
                 in_w: *inp as u32,
                 out_w: *out as u32,
@@ -297,7 +381,9 @@ impl GpuSkinner {
                             let hi = if has_hi { f16_bits(w, i1) } else { 0 };
                             v.push(u32::from(f16_bits(w, i0)) | (u32::from(hi) << 16));
                         }
-                        Packed::Single(v) => v.push([f32_at(w, i0), if has_hi { f32_at(w, i1) } else { 0.0 }]),
+                        Packed::Single(v) => {
+                            v.push([f32_at(w, i0), if has_hi { f32_at(w, i1) } else { 0.0 }])
+                        }
                     }
                 }
             }
@@ -347,23 +433,34 @@ impl GpuSkinner {
             return Err(GpuError::EmptyMesh);
         }
         if normals.len() != v_count {
-            return Err(GpuError::Length { field: "normals", len: normals.len(), expected: v_count });
+            return Err(GpuError::Length {
+                field: "normals",
+                len: normals.len(),
+                expected: v_count,
+            });
         }
         for (field, data) in [("positions", positions), ("normals", normals)] {
             if let Some(index) = data.iter().position(|p| !p.is_finite()) {
                 return Err(GpuError::NonFinite { field, index });
             }
         }
-        let vertex_count = u32::try_from(v_count)
-            .map_err(|_| GpuError::TooLarge { what: "vertices", value: v_count as u64, limit: u32::MAX.into() })?;
+        let vertex_count = u32::try_from(v_count).map_err(|_| GpuError::TooLarge {
+            what: "vertices",
+            value: v_count as u64,
+            limit: u32::MAX.into(),
+        })?;
         let mut params = model.params;
         params.vertex_count = vertex_count;
         let v = v_count as u64;
-        let (h0, hs) = (u64::from(params.term0_width), u64::from(params.term_skip_width));
+        let (h0, hs) = (
+            u64::from(params.term0_width),
+            u64::from(params.term_skip_width),
+        );
         let term_count = params.term0_width + params.term_skip_width;
         let joints = params.joint_count as usize;
         let pose_width = params.pose_width as usize;
-        let position_groups = self.check_groups("position-term workgroups", (v * (h0 + hs)).div_ceil(64))?;
+        let position_groups =
+            self.check_groups("position-term workgroups", (v * (h0 + hs)).div_ceil(64))?;
         self.check_groups("SkinNet workgroups", v.div_ceil(SKINNET_TILE.into()))?;
 
         let mut encoding = Vec::new();
@@ -371,7 +468,10 @@ impl GpuSkinner {
         let rest: Vec<SkinnedVertex> = positions
             .iter()
             .zip(normals)
-            .map(|(p, n)| SkinnedVertex { position: p.extend(1.0).to_array(), normal: n.extend(0.0).to_array() })
+            .map(|(p, n)| SkinnedVertex {
+                position: p.extend(1.0).to_array(),
+                normal: n.extend(0.0).to_array(),
+            })
             .collect();
         let params_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("skinfield params"),
@@ -381,7 +481,8 @@ impl GpuSkinner {
         let none = wgpu::BufferUsages::empty();
         let copy_dst = wgpu::BufferUsages::COPY_DST;
         let copy_src = wgpu::BufferUsages::COPY_SRC;
-        let encoding_buf = self.storage_init(device, "position encoding", bytemuck::cast_slice(&encoding))?;
+        let encoding_buf =
+            self.storage_init(device, "position encoding", bytemuck::cast_slice(&encoding))?;
         let rest_buf = self.storage_init(device, "rest vertices", bytemuck::cast_slice(&rest))?;
         let term0 = self.storage(device, "layer-0 position terms", v * h0 * 4, none)?;
         let term_skip = self.storage(device, "skip-layer position terms", v * hs * 4, none)?;
@@ -389,7 +490,8 @@ impl GpuSkinner {
         let joint_mats = self.storage(device, "skinning matrices", joints as u64 * 64, copy_dst)?;
         let pose_terms = self.storage(device, "pose terms", u64::from(term_count) * 4, none)?;
         let joint_dqs = self.storage(device, "joint dual quaternions", joints as u64 * 32, none)?;
-        let skin_weights = self.storage(device, "skinning weights", v * joints as u64 * 4, copy_src)?;
+        let skin_weights =
+            self.storage(device, "skinning weights", v * joints as u64 * 4, copy_src)?;
         let output = self.storage(
             device,
             "skinned vertices",
@@ -415,7 +517,10 @@ impl GpuSkinner {
         let group = |pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
                 .iter()
-                .map(|&b| wgpu::BindGroupEntry { binding: b, resource: buffers[b as usize].1.as_entire_binding() })
+                .map(|&b| wgpu::BindGroupEntry {
+                    binding: b,
+                    resource: buffers[b as usize].1.as_entire_binding(),
+                })
                 .collect();
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: None,
@@ -441,9 +546,14 @@ impl GpuSkinner {
             skin_weights,
             output,
         };
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("bind mesh") });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("bind mesh"),
+        });
         {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("position terms"), timestamp_writes: None });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("position terms"),
+                timestamp_writes: None,
+            });
             pass.set_pipeline(&pipes.position_terms);
             pass.set_bind_group(0, &bind_position_terms, &[]);
             self.dispatch(&mut pass, position_groups);
@@ -454,12 +564,26 @@ impl GpuSkinner {
 
     /// Writes one frame's inputs: the skinning matrices (`world · inverse_bind`, one per joint)
     /// and the pose features (`skinfield_formats::pose_features`, 3 per joint).
-    pub fn upload_frame(&self, queue: &wgpu::Queue, mesh: &GpuMesh, skinning: &[Mat4], features: &[f32]) -> Result<(), GpuError> {
+    pub fn upload_frame(
+        &self,
+        queue: &wgpu::Queue,
+        mesh: &GpuMesh,
+        skinning: &[Mat4],
+        features: &[f32],
+    ) -> Result<(), GpuError> {
         if skinning.len() != mesh.joint_count {
-            return Err(GpuError::Length { field: "skinning matrices", len: skinning.len(), expected: mesh.joint_count });
+            return Err(GpuError::Length {
+                field: "skinning matrices",
+                len: skinning.len(),
+                expected: mesh.joint_count,
+            });
         }
         if features.len() != mesh.pose_width {
-            return Err(GpuError::Length { field: "pose features", len: features.len(), expected: mesh.pose_width });
+            return Err(GpuError::Length {
+                field: "pose features",
+                len: features.len(),
+                expected: mesh.pose_width,
+            });
         }
         queue.write_buffer(&mesh.joint_mats, 0, bytemuck::cast_slice(skinning));
         if !features.is_empty() {
@@ -473,7 +597,10 @@ impl GpuSkinner {
     /// [`GpuSkinner::upload_frame`] (queue writes land before the next submission).
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, mesh: &GpuMesh, mode: Skinning) {
         let pipes = self.pipelines(mesh.format);
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("skinfield frame"), timestamp_writes: None });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("skinfield frame"),
+            timestamp_writes: None,
+        });
         pass.set_pipeline(&pipes.pose_terms);
         pass.set_bind_group(0, &mesh.bind_pose_terms, &[]);
         self.dispatch(&mut pass, mesh.term_count.div_ceil(WORKGROUP_THREADS));
@@ -490,7 +617,10 @@ impl GpuSkinner {
             Skinning::DualQuaternion => {
                 pass.set_pipeline(&self.joint_dqs);
                 pass.set_bind_group(0, &mesh.bind_joint_dqs, &[]);
-                self.dispatch(&mut pass, (mesh.joint_count as u32).div_ceil(WORKGROUP_THREADS));
+                self.dispatch(
+                    &mut pass,
+                    (mesh.joint_count as u32).div_ceil(WORKGROUP_THREADS),
+                );
                 pass.set_pipeline(&self.dqs);
                 pass.set_bind_group(0, &mesh.bind_dqs, &[]);
                 self.dispatch(&mut pass, vertex_groups);
@@ -509,7 +639,9 @@ impl GpuSkinner {
         mode: Skinning,
     ) -> Result<wgpu::SubmissionIndex, GpuError> {
         self.upload_frame(queue, mesh, skinning, features)?;
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("skinfield frame") });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("skinfield frame"),
+        });
         self.encode(&mut encoder, mesh, mode);
         Ok(queue.submit([encoder.finish()]))
     }
@@ -529,14 +661,21 @@ impl GpuModel {
     }
 }
 
-fn read_buffer(device: &wgpu::Device, queue: &wgpu::Queue, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
+fn read_buffer(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    src: &wgpu::Buffer,
+    size: u64,
+) -> Result<Vec<u8>, GpuError> {
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("read-back"),
         size,
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read-back") });
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+        label: Some("read-back"),
+    });
     encoder.copy_buffer_to_buffer(src, 0, &staging, 0, size);
     queue.submit([encoder.finish()]);
     let (tx, rx) = mpsc::channel();
@@ -572,15 +711,33 @@ impl GpuMesh {
     }
 
     /// Reads the skinned vertices back (submits a copy and waits for the device).
-    pub fn read_vertices(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<SkinnedVertex>, GpuError> {
+    pub fn read_vertices(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Vec<SkinnedVertex>, GpuError> {
         let size = u64::from(self.vertex_count) * size_of::<SkinnedVertex>() as u64;
-        Ok(bytemuck::pod_collect_to_vec(&read_buffer(device, queue, &self.output, size)?))
+        Ok(bytemuck::pod_collect_to_vec(&read_buffer(
+            device,
+            queue,
+            &self.output,
+            size,
+        )?))
     }
 
     /// Reads SkinNet's weights of the last frame back, `[vertex][joint]`.
-    pub fn read_weights(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<f32>, GpuError> {
+    pub fn read_weights(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Vec<f32>, GpuError> {
         let size = u64::from(self.vertex_count) * self.joint_count as u64 * 4;
-        Ok(bytemuck::pod_collect_to_vec(&read_buffer(device, queue, &self.skin_weights, size)?))
+        Ok(bytemuck::pod_collect_to_vec(&read_buffer(
+            device,
+            queue,
+            &self.skin_weights,
+            size,
+        )?))
     }
 }
 
@@ -590,7 +747,15 @@ mod tests {
 
     #[test]
     fn dispatch_split_covers_every_group_within_the_limit() {
-        for (groups, max) in [(0, 65535), (1, 65535), (65535, 65535), (65536, 65535), (1_000_000, 65535), (9, 3), (7, 3)] {
+        for (groups, max) in [
+            (0, 65535),
+            (1, 65535),
+            (65535, 65535),
+            (65536, 65535),
+            (1_000_000, 65535),
+            (9, 3),
+            (7, 3),
+        ] {
             let (x, y) = split_dispatch(groups, max);
             assert!(x <= max && y <= max.max(1));
             assert!(u64::from(x) * u64::from(y) >= u64::from(groups));

@@ -1,1 +1,3 @@
 //! One module per `trainer` subcommand: its clap `Args` and a `run(args) -> anyhow::Result<()>`.
+
+pub mod inspect;

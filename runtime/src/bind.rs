@@ -1,0 +1,134 @@
+//! Binding a mesh: any resolution, any vertex order. Everything that depends only on the
+//! canonical position is computed here, once: the normalised position `x̂`, its positional
+//! encoding `γ(x̂)` and the position parts `W_pos · [x̂, γ(x̂)]` of the layers that see the input
+//! (layer 0 and the skip layer), stored tile by tile in the kernels' layout so that per frame
+//! they cost one add.
+
+use alloc::vec;
+use alloc::vec::Vec;
+
+use glam::Vec3;
+use skinfield_formats::skf::ModelConfig;
+
+use crate::error::RuntimeError;
+use crate::kernels::TILE;
+use crate::model::SkinNet;
+
+/// Largest vertex count a mesh may have.
+pub const MAX_BIND_VERTICES: usize = 1 << 24;
+
+/// `x̂ = 2(x̄ − min)/(max − min) − 1` with the file's canonical bounding box.
+#[must_use]
+pub fn normalise(config: &ModelConfig, x: Vec3) -> Vec3 {
+    let lo = Vec3::from_array(config.bbox_min);
+    let hi = Vec3::from_array(config.bbox_max);
+    2.0 * (x - lo) / (hi - lo) - Vec3::ONE
+}
+
+/// The network's position input `[x̂, γ(x̂)]` into `out` (`3 + 6L` floats):
+/// `x̂`, then for `k in 0..L`: `sin(2^k π x̂)` (3), `cos(2^k π x̂)` (3). Evaluated in f64 and
+/// rounded, so it is the correctly rounded value of the definition.
+pub fn positional_encoding(
+    x_hat: Vec3,
+    frequencies: usize,
+    out: &mut [f32],
+) -> Result<(), RuntimeError> {
+    let expected = 3 + 6 * frequencies;
+    if out.len() != expected {
+        return Err(RuntimeError::BufferLength {
+            field: "out",
+            len: out.len(),
+            expected,
+        });
+    }
+    out[..3].copy_from_slice(&x_hat.to_array());
+    for k in 0..frequencies {
+        let f = libm::ldexp(core::f64::consts::PI, k as i32);
+        for c in 0..3 {
+            let a = f * f64::from(x_hat[c]);
+            out[3 + 6 * k + c] = libm::sin(a) as f32;
+            out[6 + 6 * k + c] = libm::cos(a) as f32;
+        }
+    }
+    Ok(())
+}
+
+/// A mesh bound to one model: rest positions and the per-vertex position parts, tile by tile.
+#[derive(Clone, Debug)]
+pub struct BoundMesh {
+    model_id: u64,
+    rest: Vec<Vec3>,
+    /// `tiles × pre_rows × TILE`.
+    pre: Vec<f32>,
+    pre_rows: usize,
+}
+
+impl BoundMesh {
+    /// Binds canonical positions (any count ≥ 1, any order; points outside the file's box are
+    /// allowed: the network extrapolates) to `model`.
+    pub fn bind<W: AsRef<[f32]>>(
+        model: &SkinNet<W>,
+        positions: &[Vec3],
+    ) -> Result<Self, RuntimeError> {
+        let n = positions.len();
+        if n == 0 || n > MAX_BIND_VERTICES {
+            return Err(RuntimeError::VertexCount(n));
+        }
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(RuntimeError::NonFinite {
+                field: "positions",
+                index: i,
+            });
+        }
+        let layout = model.layout();
+        let (pos_w, pre_rows) = (layout.pos_w, layout.pre_rows);
+        let tiles = n.div_ceil(TILE);
+        let block = pre_rows * TILE;
+        let mut pre = vec![0.0; tiles * block];
+        let zeros = vec![0.0; layout.max_rows_p];
+        let mut pe = vec![0.0; pos_w * TILE];
+        let mut one = vec![0.0; pos_w];
+        let freqs = model.config().pe_frequencies as usize;
+        for (t, out) in pre.chunks_exact_mut(block).enumerate() {
+            pe.fill(0.0);
+            for (lane, p) in positions[t * TILE..n.min((t + 1) * TILE)]
+                .iter()
+                .enumerate()
+            {
+                positional_encoding(normalise(model.config(), *p), freqs, &mut one)?;
+                for (f, v) in one.iter().enumerate() {
+                    pe[f * TILE + lane] = *v;
+                }
+            }
+            model.position_parts(&pe, &zeros, out);
+        }
+        Ok(Self {
+            model_id: model.id(),
+            rest: positions.to_vec(),
+            pre,
+            pre_rows,
+        })
+    }
+
+    /// Number of vertices.
+    #[must_use]
+    pub fn vertex_count(&self) -> usize {
+        self.rest.len()
+    }
+
+    /// Canonical (rest) positions.
+    #[must_use]
+    pub fn rest_positions(&self) -> &[Vec3] {
+        &self.rest
+    }
+
+    pub(crate) fn model_id(&self) -> u64 {
+        self.model_id
+    }
+
+    /// The bound block of tile `t`.
+    pub(crate) fn tile(&self, t: usize) -> &[f32] {
+        let block = self.pre_rows * TILE;
+        &self.pre[t * block..(t + 1) * block]
+    }
+}
