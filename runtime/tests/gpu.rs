@@ -1,5 +1,5 @@
-//! GPU path = an independent f64 CPU forward of SkinNet and LBS/DQS, written here from the
-//! `.skf` tensors (the runtime's CPU path had not landed when these were written).
+//! GPU path = the runtime's CPU path (`SkinJob`) and = an independent f64 CPU forward of SkinNet
+//! and LBS/DQS written here from the `.skf` tensors, within 1e-4.
 //!
 //! Runs on any wgpu adapter, Mesa's lavapipe included. Without an adapter the tests skip with a
 //! message, except under `CI=true`, where they fail so they can never silently skip.
@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 use skinfield_formats::{Pose, Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
 use skinfield_runtime::gpu::{GpuError, GpuSkinner, SkinnedVertex, Skinning, WeightFormat};
+use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 
 const TOL: f64 = 1e-4;
 
@@ -302,6 +303,10 @@ fn check_model(
     let mut mats = vec![Mat4::IDENTITY; skeleton.len()];
     skeleton.skinning_matrices(&pose, &mut mats).unwrap();
     let dmats: Vec<DMat4> = mats.iter().map(Mat4::as_dmat4).collect();
+    let cpu_net = SkinNet::from_view(&view).unwrap();
+    let mut cpu_frame = FrameState::new(&cpu_net);
+    cpu_frame.set_pose(&cpu_net, &pose).unwrap();
+    let mut scratch = Scratch::new(&cpu_net);
     for (i, &n) in sizes.iter().enumerate() {
         let (positions, normals) = random_mesh(&config, n, seed + 100 + i as u64);
         let mesh = skinner
@@ -311,6 +316,7 @@ fn check_model(
             .iter()
             .map(|&p| net.weights(p, &features))
             .collect();
+        let cpu_mesh = BoundMesh::bind(&cpu_net, &positions).unwrap();
         for mode in [Skinning::Linear, Skinning::DualQuaternion] {
             skinner
                 .skin(device, queue, &mesh, &mats, &features, mode)
@@ -321,7 +327,42 @@ fn check_model(
                 (weights.len(), out.len()),
                 (n * config.joint_count as usize, n)
             );
+            // The runtime's CPU path on the same inputs.
+            let (mut cpu_p, mut cpu_n) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n]);
+            let mut cpu_w = vec![0.0; weights.len()];
+            SkinJob {
+                model: &cpu_net,
+                mesh: &cpu_mesh,
+                frame: &cpu_frame,
+                method: match mode {
+                    Skinning::Linear => Method::Lbs,
+                    Skinning::DualQuaternion => Method::Dqs,
+                },
+                first_vertex: 0,
+                rest_normals: Some(&normals),
+                rest_tangents: None,
+                out_positions: &mut cpu_p,
+                out_normals: Some(&mut cpu_n),
+                out_tangents: None,
+                out_weights: Some(&mut cpu_w),
+            }
+            .run(&mut scratch)
+            .unwrap();
+            let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+            close("weights vs CPU path", 0, &weights, &widen(&cpu_w));
             for v in 0..n {
+                close(
+                    &format!("{mode:?} position vs CPU path"),
+                    v,
+                    &out[v].position[..3],
+                    &widen(&cpu_p[v].to_array()),
+                );
+                close(
+                    &format!("{mode:?} normal vs CPU path"),
+                    v,
+                    &out[v].normal[..3],
+                    &widen(&cpu_n[v].to_array()),
+                );
                 let w = &reference[v];
                 close("weights", v, &weights[v * w.len()..(v + 1) * w.len()], w);
                 let (p, nrm) = (positions[v].as_dvec3(), normals[v].as_dvec3());
