@@ -2,10 +2,10 @@
 //! wgpu finds (Mesa's lavapipe on a machine without a GPU).
 //!
 //! Each iteration uploads a frame, records and submits it, and waits for the queue, so the time
-//! is the whole frame as an engine would see it. Vertex counts: `SKINFIELD_GPU_BENCH_VERTICES`
-//! (comma-separated, default `10000,100000`). No CPU reference runs here yet: the runtime's
-//! CPU path was not in this branch when this bench was written, and an f64 scalar reference
-//! would not be a fair ratio; the report gives the GPU time alone.
+//! is the whole frame as an engine would see it. The reference in the same run is the runtime's
+//! CPU path (`FrameState::set_pose` + one `SkinJob` over the whole mesh, one thread, the kernel
+//! picked at run time). Vertex counts: `SKINFIELD_GPU_BENCH_VERTICES` (comma-separated, default
+//! `10000,100000`).
 
 use std::time::{Duration, Instant};
 
@@ -16,6 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 use skinfield_formats::{Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
 use skinfield_runtime::gpu::{GpuSkinner, Skinning};
+use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 
 fn vertex_counts() -> Vec<usize> {
     std::env::var("SKINFIELD_GPU_BENCH_VERTICES")
@@ -76,7 +77,11 @@ fn bench_gpu(c: &mut Criterion) {
     let mut mats = vec![Mat4::IDENTITY; joints];
     skeleton.skinning_matrices(&pose, &mut mats).unwrap();
 
-    let mut group = c.benchmark_group("gpu_skinnet_lbs");
+    let cpu_net = SkinNet::from_view(&view).unwrap();
+    let mut cpu_frame = FrameState::new(&cpu_net);
+    let mut scratch = Scratch::new(&cpu_net);
+
+    let mut group = c.benchmark_group("skinnet_lbs_frame");
     group.sample_size(10);
     for n in vertex_counts() {
         let positions: Vec<Vec3> = (0..n)
@@ -94,7 +99,7 @@ fn bench_gpu(c: &mut Criterion) {
             .unwrap();
         device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
         group.throughput(Throughput::Elements(n as u64));
-        group.bench_function(BenchmarkId::new("frame", n), |b| {
+        group.bench_function(BenchmarkId::new("gpu", n), |b| {
             b.iter_custom(|iters| {
                 let mut total = Duration::ZERO;
                 for _ in 0..iters {
@@ -106,6 +111,28 @@ fn bench_gpu(c: &mut Criterion) {
                     total += start.elapsed();
                 }
                 total
+            });
+        });
+        let cpu_mesh = BoundMesh::bind(&cpu_net, &positions).unwrap();
+        let (mut out_p, mut out_n) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n]);
+        group.bench_function(BenchmarkId::new("cpu_runtime_1_thread", n), |b| {
+            b.iter(|| {
+                cpu_frame.set_pose(&cpu_net, &pose).unwrap();
+                SkinJob {
+                    model: &cpu_net,
+                    mesh: &cpu_mesh,
+                    frame: &cpu_frame,
+                    method: Method::Lbs,
+                    first_vertex: 0,
+                    rest_normals: Some(&normals),
+                    rest_tangents: None,
+                    out_positions: &mut out_p,
+                    out_normals: Some(&mut out_n),
+                    out_tangents: None,
+                    out_weights: None,
+                }
+                .run(&mut scratch)
+                .unwrap();
             });
         });
     }

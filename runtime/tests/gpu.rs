@@ -266,8 +266,8 @@ fn dqs(w: &[f64], mats: &[DMat4], p: DVec3, n: DVec3) -> (DVec3, DVec3) {
         } else {
             w[j]
         };
-        br = br + *r * s;
-        bd = bd + *d * s;
+        br += *r * s;
+        bd += *d * s;
     }
     let len = br.length();
     let (br, bd) = (br * (1.0 / len), bd * (1.0 / len));
