@@ -12,7 +12,11 @@
 
 extern crate alloc;
 
+#[cfg(feature = "std")]
+pub mod bvh;
 pub mod camera;
+#[cfg(feature = "std")]
+pub mod capture;
 #[cfg(feature = "std")]
 pub mod gltf_io;
 pub mod math;

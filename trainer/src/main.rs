@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Print the version.
     Version,
+    /// Write the built-in synthetic multi-view capture (procedural clothed character).
+    Synth(cli::synth::Args),
     /// Describe a glTF/GLB or .skf file as one JSON object.
     Inspect(cli::inspect::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
@@ -30,6 +32,7 @@ fn main() {
             println!("{}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Synth(args) => cli::synth::run(args),
         Command::Inspect(args) => cli::inspect::run(args),
     };
     if let Err(e) = result {

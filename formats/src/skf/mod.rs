@@ -29,7 +29,7 @@ mod view;
 mod write;
 
 pub use config::{ModelConfig, Net, SkfConfigError};
-pub use view::{Dtype, SkeletonView, SkfError, SkfView, TensorName, TensorView};
+pub use view::{Dtype, SkeletonView, SkfError, SkfView, Tag, TensorName, TensorView};
 #[cfg(feature = "std")]
 pub use write::{SkfFileError, SkfModel, read_skf_file, write_atomic};
 

@@ -105,8 +105,10 @@ impl SkfModel {
             if dims.is_empty() || dims.len() > 2 || elems != values.len() || elems == 0 {
                 return Err(invalid(format!("tensor `{name}` has dims {dims:?} but {} values", values.len())));
             }
-            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                return Err(invalid(format!("tensor `{name}` has a non-finite value at {i}")));
+            // f16 saturates to infinity above 65504: refuse rather than store a value the
+            // runtime would read back as inf.
+            if let Some(i) = values.iter().position(|v| !(v.is_finite() && v.abs() <= f32::from(f16::MAX))) {
+                return Err(invalid(format!("tensor `{name}` has a value at {i} that is not finite in f16")));
             }
             let offset = align_up(data.len()).ok_or_else(|| invalid("DATA too large".into()))?;
             data.resize(offset, 0);
@@ -188,4 +190,29 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Transform;
+    use glam::Mat4;
+
+    #[test]
+    fn refuses_values_that_overflow_f16() {
+        let skeleton =
+            Skeleton::new(vec!["root".into()], vec![None], vec![Transform::IDENTITY], None, None, Mat4::IDENTITY)
+                .unwrap();
+        let mut config = ModelConfig::vinecs(1, [-1.0; 3], [1.0; 3]);
+        config.hidden_count = 1;
+        config.hidden = [4, 0, 0, 0, 0, 0, 0, 0];
+        config.skip_layer = 0;
+        let mut model = SkfModel { config, skeleton, tensors: Vec::new() };
+        for (i, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
+            model.push_layer(Net::Skin, i, vec![0.5; out * inp], out, inp, vec![0.0; out]);
+        }
+        model.to_bytes().unwrap();
+        model.tensors[0].2[3] = 70000.0;
+        assert!(matches!(model.to_bytes(), Err(SkfFileError::Invalid(m)) if m.contains("f16")));
+    }
 }

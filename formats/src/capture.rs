@@ -1,0 +1,771 @@
+//! Multi-view captures on disk: the manifest, its validating loader and the writers.
+//!
+//! # Layout
+//!
+//! A capture is a folder:
+//!
+//! ```text
+//! DIR/
+//!   manifest.json                 CaptureManifest (below); every path in it is relative to DIR
+//!   template.json                 TemplateFile: canonical mesh (positions, normals, triangles,
+//!                                 optional colours / uvs / part labels) and the skeleton
+//!                                 (names, parents, bind-pose local TRS, joint-angle DOFs, base)
+//!   motion.json                   MotionFile: one Pose per frame (10 numbers per joint:
+//!                                 translation xyz, rotation quaternion xyzw, scale xyz)
+//!   initial_weights.json          optional SkinFile (CSR static weights) the trainer may start from
+//!   images/{camera}/{frame:05}.png  RGB, sRGB-encoded 8-bit (or .exr: linear float RGB)
+//!   masks/{camera}/{frame:05}.png   8-bit grey, foreground > 127
+//!   eval/true_weights.json        EVALUATION ONLY: the ground-truth deformer's static weights
+//!   eval/gt/{frame:05}.bin        EVALUATION ONLY: ground-truth posed positions of a test frame
+//!                                 (b"SFGTMESH", u32 LE version 1, u32 LE vertex count, then
+//!                                 3 × f32 LE per vertex; triangles are the template's)
+//! ```
+//!
+//! The manifest lists the cameras (OpenCV pinhole: resolution, `fx fy cx cy`, Brown–Conrady
+//! distortion, world-to-camera rotation rows and translation), the named clips of the motion,
+//! and the train and test frame indices (disjoint). [`load_capture`] reads the manifest, the
+//! template, the skeleton, the motion and the initial weights eagerly and validates all of it
+//! (sizes, indices, finiteness, that every image and mask file exists); images, masks and the
+//! evaluation files are read lazily. Every error names the file and the field that is wrong.
+//!
+//! The trainer must never call [`Capture::evaluation_gt_mesh`] or
+//! [`Capture::evaluation_true_weights`]: they exist for `trainer eval` alone.
+
+use std::path::{Component, Path, PathBuf};
+
+use glam::{Mat3, Quat, Vec2, Vec3};
+
+use crate::camera::{Camera, CameraRig, Distortion};
+use crate::math::Transform;
+use crate::mesh::{PartLabel, Template};
+use crate::pose::{Pose, UpAxis};
+use crate::skeleton::{Axis, JointDofs, Skeleton};
+use crate::skin::StaticSkin;
+
+mod images;
+mod schema;
+mod write;
+
+pub use images::{
+    CaptureImage, CaptureMask, GT_MESH_MAGIC, linear_to_srgb, read_gt_positions, read_image,
+    read_mask, srgb_to_linear, write_gt_positions, write_image_exr, write_image_png,
+    write_mask_png,
+};
+pub use schema::{
+    CameraEntry, CaptureManifest, ClipEntry, DofsEntry, EvaluationEntry, ImageFormat, JointEntry,
+    MotionFile, SkeletonEntry, SkinFile, SourceEntry, TemplateFile,
+};
+pub use write::{CaptureWriter, skeleton_to_entry, skin_to_file, template_to_file};
+
+/// The manifest's file name inside a capture folder.
+pub const MANIFEST_FILE: &str = "manifest.json";
+/// Value of [`CaptureManifest::format`].
+pub const CAPTURE_FORMAT: &str = "skinfield-capture";
+/// The manifest version this reader understands.
+pub const CAPTURE_VERSION: u32 = 1;
+/// Largest JSON file the loader reads (bytes).
+pub const MAX_JSON_BYTES: u64 = 512 << 20;
+/// Largest frame count a capture may declare.
+pub const MAX_FRAMES: usize = 1 << 20;
+/// Largest camera count a capture may declare.
+pub const MAX_CAMERAS: usize = 1024;
+
+/// Why a capture could not be read, naming the file and (where known) the field.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// The file could not be read or written.
+    #[error("{}: {source}", file.display())]
+    Io {
+        /// The file.
+        file: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not valid JSON of the expected shape.
+    #[error("{}: {source}", file.display())]
+    Json {
+        /// The file.
+        file: PathBuf,
+        /// serde_json's message (with line and column).
+        source: serde_json::Error,
+    },
+    /// A field has a wrong value.
+    #[error("{}: field `{field}`: {reason}", file.display())]
+    Invalid {
+        /// The file.
+        file: PathBuf,
+        /// The field (a JSON path such as `cameras[3].fx`).
+        field: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// An image or binary mesh file is malformed.
+    #[error("{}: {reason}", file.display())]
+    BadFile {
+        /// The file.
+        file: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl CaptureError {
+    pub(crate) fn invalid(
+        file: &Path,
+        field: impl Into<String>,
+        reason: impl core::fmt::Display,
+    ) -> Self {
+        Self::Invalid {
+            file: file.to_owned(),
+            field: field.into(),
+            reason: reason.to_string(),
+        }
+    }
+}
+
+/// A loaded, validated capture. Images and masks are read on demand.
+#[derive(Clone, Debug)]
+pub struct Capture {
+    /// The capture folder.
+    pub dir: PathBuf,
+    /// The manifest as read.
+    pub manifest: CaptureManifest,
+    /// The calibrated cameras (manifest order).
+    pub rig: CameraRig,
+    /// The template mesh (with part labels and colours where the capture has them).
+    pub template: Template,
+    /// The skeleton with its joint-angle degrees of freedom.
+    pub skeleton: Skeleton,
+    /// The world's up axis.
+    pub up_axis: UpAxis,
+    /// Initial static weights shipped with the capture, if any.
+    pub initial_weights: Option<StaticSkin>,
+    /// One pose per frame.
+    pub poses: Vec<Pose>,
+    /// Training frame indices.
+    pub train_frames: Vec<usize>,
+    /// Test frame indices (disjoint from the training frames).
+    pub test_frames: Vec<usize>,
+}
+
+impl Capture {
+    /// Number of frames.
+    #[must_use]
+    pub fn frame_count(&self) -> usize {
+        self.poses.len()
+    }
+
+    /// Path of the image of camera `cam` (index into the rig) at `frame`.
+    #[must_use]
+    pub fn image_path(&self, cam: usize, frame: usize) -> PathBuf {
+        frame_file(
+            &self.dir,
+            &self.manifest.images,
+            &self.rig.cameras[cam].name,
+            frame,
+            self.manifest.image_format,
+        )
+    }
+
+    /// Path of the mask of camera `cam` at `frame` (always PNG).
+    #[must_use]
+    pub fn mask_path(&self, cam: usize, frame: usize) -> PathBuf {
+        frame_file(
+            &self.dir,
+            &self.manifest.masks,
+            &self.rig.cameras[cam].name,
+            frame,
+            ImageFormat::Png,
+        )
+    }
+
+    fn check_index(&self, cam: usize, frame: usize) -> Result<(), CaptureError> {
+        let file = self.dir.join(MANIFEST_FILE);
+        if cam >= self.rig.cameras.len() {
+            return Err(CaptureError::invalid(
+                &file,
+                "cameras",
+                format!("camera index {cam} out of range"),
+            ));
+        }
+        if frame >= self.poses.len() {
+            return Err(CaptureError::invalid(
+                &file,
+                "frame_count",
+                format!("frame {frame} out of range"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Reads the image of camera `cam` at `frame` as linear RGB in [0, 1] (PNG is sRGB-decoded).
+    pub fn load_image(&self, cam: usize, frame: usize) -> Result<CaptureImage, CaptureError> {
+        self.check_index(cam, frame)?;
+        let c = &self.rig.cameras[cam];
+        images::read_image(&self.image_path(cam, frame), c.width, c.height)
+    }
+
+    /// Reads the foreground mask of camera `cam` at `frame`.
+    pub fn load_mask(&self, cam: usize, frame: usize) -> Result<CaptureMask, CaptureError> {
+        self.check_index(cam, frame)?;
+        let c = &self.rig.cameras[cam];
+        images::read_mask(&self.mask_path(cam, frame), c.width, c.height)
+    }
+
+    /// EVALUATION ONLY — the trainer must never call this. Ground-truth posed vertex positions
+    /// of test frame `frame` (same vertex order and triangles as [`Capture::template`]).
+    pub fn evaluation_gt_mesh(&self, frame: usize) -> Result<Vec<Vec3>, CaptureError> {
+        let manifest_file = self.dir.join(MANIFEST_FILE);
+        let eval = self.manifest.evaluation.as_ref().ok_or_else(|| {
+            CaptureError::invalid(&manifest_file, "evaluation", "capture has no ground truth")
+        })?;
+        if !self.test_frames.contains(&frame) {
+            return Err(CaptureError::invalid(
+                &manifest_file,
+                "test_frames",
+                format!("frame {frame} is not a test frame"),
+            ));
+        }
+        let path = self
+            .dir
+            .join(&eval.gt_meshes)
+            .join(format!("{frame:05}.bin"));
+        read_gt_positions(&path, self.template.vertex_count())
+    }
+
+    /// EVALUATION ONLY — the trainer must never call this. The ground-truth deformer's static
+    /// weights (for a glTF character, the artist's), if the capture has them.
+    pub fn evaluation_true_weights(&self) -> Result<Option<StaticSkin>, CaptureError> {
+        let Some(rel) = self
+            .manifest
+            .evaluation
+            .as_ref()
+            .and_then(|e| e.true_weights.as_ref())
+        else {
+            return Ok(None);
+        };
+        let path = self.dir.join(rel);
+        let file: SkinFile = read_json(&path)?;
+        file.to_skin(&path, self.template.vertex_count(), self.skeleton.len())
+            .map(Some)
+    }
+}
+
+pub(crate) fn frame_file(
+    dir: &Path,
+    folder: &str,
+    camera: &str,
+    frame: usize,
+    format: ImageFormat,
+) -> PathBuf {
+    dir.join(folder)
+        .join(camera)
+        .join(format!("{frame:05}.{}", format.extension()))
+}
+
+/// Reads a JSON file of at most [`MAX_JSON_BYTES`].
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, CaptureError> {
+    let io = |source| CaptureError::Io {
+        file: path.to_owned(),
+        source,
+    };
+    let len = std::fs::metadata(path).map_err(io)?.len();
+    if len > MAX_JSON_BYTES {
+        return Err(CaptureError::BadFile {
+            file: path.to_owned(),
+            reason: format!("{len} bytes, more than {MAX_JSON_BYTES}"),
+        });
+    }
+    let bytes = std::fs::read(path).map_err(io)?;
+    serde_json::from_slice(&bytes).map_err(|source| CaptureError::Json {
+        file: path.to_owned(),
+        source,
+    })
+}
+
+/// Checks that a manifest path is relative and stays inside the capture folder.
+fn check_relative(file: &Path, field: &str, rel: &str) -> Result<(), CaptureError> {
+    let p = Path::new(rel);
+    let ok = !rel.is_empty()
+        && p.components()
+            .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+    if ok {
+        Ok(())
+    } else {
+        Err(CaptureError::invalid(
+            file,
+            field,
+            format!("`{rel}` must be a relative path inside the capture"),
+        ))
+    }
+}
+
+/// Camera names become folder names: keep them to a portable alphabet.
+fn check_name(file: &Path, field: &str, name: &str) -> Result<(), CaptureError> {
+    let ok = !name.is_empty()
+        && name.len() <= 64
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if ok {
+        Ok(())
+    } else {
+        Err(CaptureError::invalid(
+            file,
+            field,
+            format!("`{name}` is not a name of [A-Za-z0-9_-], 1 to 64 long"),
+        ))
+    }
+}
+
+fn check_frames(
+    file: &Path,
+    field: &str,
+    frames: &[usize],
+    count: usize,
+) -> Result<(), CaptureError> {
+    for (i, &f) in frames.iter().enumerate() {
+        if f >= count {
+            return Err(CaptureError::invalid(
+                file,
+                format!("{field}[{i}]"),
+                format!("frame {f} >= frame_count {count}"),
+            ));
+        }
+        if frames[..i].contains(&f) {
+            return Err(CaptureError::invalid(
+                file,
+                format!("{field}[{i}]"),
+                format!("frame {f} listed twice"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Reads and validates the capture in `dir` (see the module docs for the layout).
+pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
+    let dir = dir.as_ref().to_owned();
+    let mfile = dir.join(MANIFEST_FILE);
+    let manifest: CaptureManifest = read_json(&mfile)?;
+    let m = &manifest;
+    if m.format != CAPTURE_FORMAT {
+        return Err(CaptureError::invalid(
+            &mfile,
+            "format",
+            format!("`{}` is not `{CAPTURE_FORMAT}`", m.format),
+        ));
+    }
+    if m.version != CAPTURE_VERSION {
+        return Err(CaptureError::invalid(
+            &mfile,
+            "version",
+            format!("version {} is not {CAPTURE_VERSION}", m.version),
+        ));
+    }
+    let up_axis = match m.up_axis.as_str() {
+        "y" => UpAxis::Y,
+        "z" => UpAxis::Z,
+        other => {
+            return Err(CaptureError::invalid(
+                &mfile,
+                "up_axis",
+                format!("`{other}` is not `y` or `z`"),
+            ));
+        }
+    };
+    if m.cameras.is_empty() || m.cameras.len() > MAX_CAMERAS {
+        return Err(CaptureError::invalid(
+            &mfile,
+            "cameras",
+            format!("{} cameras (1 to {MAX_CAMERAS} allowed)", m.cameras.len()),
+        ));
+    }
+    let mut rig = CameraRig::default();
+    for (i, c) in m.cameras.iter().enumerate() {
+        check_name(&mfile, &format!("cameras[{i}].name"), &c.name)?;
+        if m.cameras[..i].iter().any(|o| o.name == c.name) {
+            return Err(CaptureError::invalid(
+                &mfile,
+                format!("cameras[{i}].name"),
+                format!("`{}` appears twice", c.name),
+            ));
+        }
+        let cam = c.to_camera();
+        cam.validate()
+            .map_err(|e| CaptureError::invalid(&mfile, format!("cameras[{i}]"), e))?;
+        rig.cameras.push(cam);
+    }
+    for (field, rel) in [
+        ("template", &m.template),
+        ("motion", &m.motion),
+        ("images", &m.images),
+        ("masks", &m.masks),
+    ] {
+        check_relative(&mfile, field, rel)?;
+    }
+    if let Some(rel) = &m.initial_weights {
+        check_relative(&mfile, "initial_weights", rel)?;
+    }
+    if let Some(e) = &m.evaluation {
+        check_relative(&mfile, "evaluation.gt_meshes", &e.gt_meshes)?;
+        if let Some(rel) = &e.true_weights {
+            check_relative(&mfile, "evaluation.true_weights", rel)?;
+        }
+    }
+    if m.frame_count == 0 || m.frame_count > MAX_FRAMES {
+        return Err(CaptureError::invalid(
+            &mfile,
+            "frame_count",
+            format!("{} frames (1 to {MAX_FRAMES} allowed)", m.frame_count),
+        ));
+    }
+    check_frames(&mfile, "train_frames", &m.train_frames, m.frame_count)?;
+    check_frames(&mfile, "test_frames", &m.test_frames, m.frame_count)?;
+    if m.train_frames.is_empty() {
+        return Err(CaptureError::invalid(
+            &mfile,
+            "train_frames",
+            "no training frames",
+        ));
+    }
+    if let Some(f) = m.test_frames.iter().find(|f| m.train_frames.contains(f)) {
+        return Err(CaptureError::invalid(
+            &mfile,
+            "test_frames",
+            format!("frame {f} is also a training frame"),
+        ));
+    }
+    for (i, clip) in m.clips.iter().enumerate() {
+        let end = clip.first.checked_add(clip.count);
+        if clip.count == 0 || end.is_none_or(|e| e > m.frame_count) {
+            return Err(CaptureError::invalid(
+                &mfile,
+                format!("clips[{i}]"),
+                "frame range empty or past frame_count",
+            ));
+        }
+    }
+
+    let tfile = dir.join(&m.template);
+    let tf: TemplateFile = read_json(&tfile)?;
+    let template = tf.to_template(&tfile)?;
+    let skeleton = tf.skeleton.to_skeleton(&tfile)?;
+
+    let initial_weights = match &m.initial_weights {
+        Some(rel) => {
+            let path = dir.join(rel);
+            let sf: SkinFile = read_json(&path)?;
+            Some(sf.to_skin(&path, template.vertex_count(), skeleton.len())?)
+        }
+        None => None,
+    };
+
+    let motion_file = dir.join(&m.motion);
+    let motion: MotionFile = read_json(&motion_file)?;
+    let poses = motion.to_poses(&motion_file, &skeleton)?;
+    if poses.len() != m.frame_count {
+        return Err(CaptureError::invalid(
+            &motion_file,
+            "frames",
+            format!(
+                "{} frames, but the manifest's frame_count is {}",
+                poses.len(),
+                m.frame_count
+            ),
+        ));
+    }
+
+    let capture = Capture {
+        train_frames: m.train_frames.clone(),
+        test_frames: m.test_frames.clone(),
+        dir,
+        rig,
+        template,
+        skeleton,
+        up_axis,
+        initial_weights,
+        poses,
+        manifest,
+    };
+    // Every image and mask must exist; reading them stays lazy.
+    let used: Vec<usize> = capture
+        .train_frames
+        .iter()
+        .chain(&capture.test_frames)
+        .copied()
+        .collect();
+    for cam in 0..capture.rig.cameras.len() {
+        for &f in &used {
+            for path in [capture.image_path(cam, f), capture.mask_path(cam, f)] {
+                if !path.is_file() {
+                    return Err(CaptureError::BadFile {
+                        file: path,
+                        reason: "missing (listed by manifest.json)".into(),
+                    });
+                }
+            }
+        }
+    }
+    Ok(capture)
+}
+
+impl CameraEntry {
+    /// The camera this entry describes (not yet validated).
+    #[must_use]
+    pub fn to_camera(&self) -> Camera {
+        let [k1, k2, p1, p2, k3] = self.distortion;
+        let r = self.rotation;
+        Camera {
+            name: self.name.clone(),
+            width: self.width,
+            height: self.height,
+            fx: self.fx,
+            fy: self.fy,
+            cx: self.cx,
+            cy: self.cy,
+            distortion: Distortion { k1, k2, p1, p2, k3 },
+            // Rows in the file; glam matrices are built from columns.
+            rotation: Mat3::from_cols_array_2d(&r).transpose(),
+            translation: Vec3::from_array(self.translation),
+        }
+    }
+
+    /// The entry of a camera (exact: the floats are copied, not recomputed).
+    #[must_use]
+    pub fn from_camera(c: &Camera) -> Self {
+        let d = c.distortion;
+        Self {
+            name: c.name.clone(),
+            width: c.width,
+            height: c.height,
+            fx: c.fx,
+            fy: c.fy,
+            cx: c.cx,
+            cy: c.cy,
+            distortion: [d.k1, d.k2, d.p1, d.p2, d.k3],
+            rotation: c.rotation.transpose().to_cols_array_2d(),
+            translation: c.translation.to_array(),
+        }
+    }
+}
+
+impl TemplateFile {
+    /// The template mesh, validated.
+    pub fn to_template(&self, file: &Path) -> Result<Template, CaptureError> {
+        let n = self.positions.len();
+        let t = Template {
+            positions: self
+                .positions
+                .iter()
+                .map(|p| Vec3::from_array(*p))
+                .collect(),
+            normals: self.normals.iter().map(|p| Vec3::from_array(*p)).collect(),
+            triangles: self.triangles.clone(),
+            uvs: self
+                .uvs
+                .as_ref()
+                .map(|u| u.iter().map(|p| Vec2::from_array(*p)).collect()),
+            colors: self
+                .colors
+                .as_ref()
+                .map(|u| u.iter().map(|p| Vec3::from_array(*p)).collect()),
+            part_labels: match &self.part_labels {
+                None => None,
+                Some(labels) => Some(
+                    labels
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &l)| match l {
+                            0 => Ok(PartLabel::Skin),
+                            1 => Ok(PartLabel::Clothing),
+                            _ => Err(CaptureError::invalid(
+                                file,
+                                format!("part_labels[{i}]"),
+                                format!("{l} is not 0 (skin) or 1 (clothing)"),
+                            )),
+                        })
+                        .collect::<Result<_, _>>()?,
+                ),
+            },
+        };
+        t.validate()
+            .map_err(|e| CaptureError::invalid(file, "mesh", e))?;
+        let bad_color =
+            |c: &Vec3| !(c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= 1.0);
+        if let Some(i) = t.colors.as_ref().and_then(|c| c.iter().position(bad_color)) {
+            return Err(CaptureError::invalid(
+                file,
+                format!("colors[{i}]"),
+                "not in [0, 1]",
+            ));
+        }
+        if let Some(i) = t
+            .normals
+            .iter()
+            .position(|v| (v.length() - 1.0).abs() > 1e-3)
+        {
+            return Err(CaptureError::invalid(
+                file,
+                format!("normals[{i}]"),
+                "not a unit vector",
+            ));
+        }
+        debug_assert_eq!(t.vertex_count(), n);
+        Ok(t)
+    }
+}
+
+impl SkeletonEntry {
+    /// The skeleton, validated.
+    pub fn to_skeleton(&self, file: &Path) -> Result<Skeleton, CaptureError> {
+        if self.joints.len() > crate::skeleton::MAX_JOINTS {
+            return Err(CaptureError::invalid(
+                file,
+                "skeleton.joints",
+                "too many joints",
+            ));
+        }
+        let mut names = Vec::new();
+        let mut parents = Vec::new();
+        let mut locals = Vec::new();
+        let mut dofs = Vec::new();
+        for (j, e) in self.joints.iter().enumerate() {
+            names.push(e.name.clone());
+            parents.push(e.parent);
+            locals.push(transform_from_array(&e.bind_local));
+            dofs.push(e.dofs.to_dofs().ok_or_else(|| {
+                CaptureError::invalid(
+                    file,
+                    format!("skeleton.joints[{j}].dofs"),
+                    "axes must be 1 to 3 of X/Y/Z with one [min, max] each",
+                )
+            })?);
+        }
+        let base = glam::Mat4::from_cols_array(&self.base);
+        Skeleton::new(names, parents, locals, None, Some(dofs), base)
+            .map_err(|e| CaptureError::invalid(file, "skeleton", e))
+    }
+}
+
+impl DofsEntry {
+    /// The degrees of freedom, or `None` for an invalid axis string or limit count.
+    #[must_use]
+    pub fn to_dofs(&self) -> Option<JointDofs> {
+        Some(match self {
+            DofsEntry::Free => JointDofs::Free,
+            DofsEntry::Fixed => JointDofs::Fixed,
+            DofsEntry::Euler { axes, limits } => {
+                let axes: Vec<Axis> = axes
+                    .chars()
+                    .map(|c| match c {
+                        'X' => Some(Axis::X),
+                        'Y' => Some(Axis::Y),
+                        'Z' => Some(Axis::Z),
+                        _ => None,
+                    })
+                    .collect::<Option<_>>()?;
+                let ok = (1..=3).contains(&axes.len())
+                    && limits.len() == axes.len()
+                    && limits
+                        .iter()
+                        .all(|[a, b]| a.is_finite() && b.is_finite() && a <= b);
+                if !ok {
+                    return None;
+                }
+                JointDofs::Euler {
+                    axes,
+                    limits: limits.clone(),
+                }
+            }
+        })
+    }
+}
+
+/// A transform from `[tx, ty, tz, qx, qy, qz, qw, sx, sy, sz]`.
+#[must_use]
+pub fn transform_from_array(a: &[f32; 10]) -> Transform {
+    Transform {
+        translation: Vec3::new(a[0], a[1], a[2]),
+        rotation: Quat::from_xyzw(a[3], a[4], a[5], a[6]),
+        scale: Vec3::new(a[7], a[8], a[9]),
+    }
+}
+
+/// `[tx, ty, tz, qx, qy, qz, qw, sx, sy, sz]` of a transform.
+#[must_use]
+pub fn transform_to_array(t: &Transform) -> [f32; 10] {
+    let (p, q, s) = (t.translation, t.rotation, t.scale);
+    [p.x, p.y, p.z, q.x, q.y, q.z, q.w, s.x, s.y, s.z]
+}
+
+impl MotionFile {
+    /// One pose per frame, each checked against the skeleton (joint count, finite, unit
+    /// quaternions within 1e-3).
+    pub fn to_poses(&self, file: &Path, skeleton: &Skeleton) -> Result<Vec<Pose>, CaptureError> {
+        if self.frames.len() > MAX_FRAMES {
+            return Err(CaptureError::invalid(file, "frames", "too many frames"));
+        }
+        let mut poses = Vec::with_capacity(self.frames.len());
+        for (f, frame) in self.frames.iter().enumerate() {
+            if frame.len() != skeleton.len() {
+                return Err(CaptureError::invalid(
+                    file,
+                    format!("frames[{f}]"),
+                    format!(
+                        "{} joints, the skeleton has {}",
+                        frame.len(),
+                        skeleton.len()
+                    ),
+                ));
+            }
+            let locals: Vec<Transform> = frame.iter().map(transform_from_array).collect();
+            for (j, t) in locals.iter().enumerate() {
+                if !t.is_finite() || (t.rotation.length() - 1.0).abs() > 1e-3 {
+                    return Err(CaptureError::invalid(
+                        file,
+                        format!("frames[{f}][{j}]"),
+                        "non-finite or non-unit rotation",
+                    ));
+                }
+            }
+            poses.push(Pose { locals });
+        }
+        Ok(poses)
+    }
+}
+
+impl SkinFile {
+    /// The static skin, validated against the vertex and joint counts.
+    pub fn to_skin(
+        &self,
+        file: &Path,
+        vertices: usize,
+        joints: usize,
+    ) -> Result<StaticSkin, CaptureError> {
+        if self.offsets.len() != vertices + 1 {
+            return Err(CaptureError::invalid(
+                file,
+                "offsets",
+                format!("{} entries, expected {}", self.offsets.len(), vertices + 1),
+            ));
+        }
+        if self.joint_count != joints {
+            return Err(CaptureError::invalid(
+                file,
+                "joint_count",
+                format!("{} joints, the skeleton has {joints}", self.joint_count),
+            ));
+        }
+        StaticSkin::new(
+            self.offsets.clone(),
+            self.joints.clone(),
+            self.weights.clone(),
+            joints,
+        )
+        .map_err(|e| CaptureError::invalid(file, "weights", e))
+    }
+}
+
+#[cfg(test)]
+mod tests;

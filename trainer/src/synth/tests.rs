@@ -1,0 +1,383 @@
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use glam::{Mat4, Quat, Vec3};
+use skinfield_formats::capture::load_capture;
+
+use super::body::Part;
+use super::character::{bind_positions, joint};
+use super::deform::{DeformParts, SKIRT_CLEARANCE, dqs, lbs};
+use super::*;
+
+fn small() -> SynthConfig {
+    SynthConfig {
+        grid: 48,
+        target_vertices: 3000,
+        ..SynthConfig::tiny()
+    }
+}
+
+/// Every file under `dir` (relative path → bytes).
+fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_owned()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.insert(
+                    p.strip_prefix(dir).unwrap().display().to_string(),
+                    std::fs::read(&p).unwrap(),
+                );
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn same_seed_same_bytes_other_seed_other_bytes() {
+    let (a, b, c) = (
+        tempfile::tempdir().unwrap(),
+        tempfile::tempdir().unwrap(),
+        tempfile::tempdir().unwrap(),
+    );
+    synthesize(a.path(), &SynthConfig::tiny()).unwrap();
+    synthesize(b.path(), &SynthConfig::tiny()).unwrap();
+    synthesize(
+        c.path(),
+        &SynthConfig {
+            seed: 1,
+            ..SynthConfig::tiny()
+        },
+    )
+    .unwrap();
+    let (ta, tb, tc) = (tree(a.path()), tree(b.path()), tree(c.path()));
+    assert!(ta.len() > 10, "{:?}", ta.keys());
+    assert_eq!(ta.keys().collect::<Vec<_>>(), tb.keys().collect::<Vec<_>>());
+    for (k, v) in &ta {
+        assert!(
+            tb[k] == *v,
+            "{k} differs between two runs with the same seed"
+        );
+    }
+    assert_ne!(ta["motion.json"], tc["motion.json"]);
+    assert_ne!(ta["template.json"], tc["template.json"]);
+}
+
+#[test]
+fn synthetic_capture_loads_back_with_everything_in_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig::tiny();
+    let summary = synthesize(dir.path(), &config).unwrap();
+    let character = build_character(&config).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    assert_eq!(cap.template, character.template);
+    assert_eq!(cap.skeleton, character.skeleton);
+    assert_eq!(cap.rig.cameras.len(), 2);
+    assert_eq!((cap.train_frames.len(), cap.test_frames.len()), (5, 3));
+    assert_eq!(
+        (summary.train_frames, summary.test_frames, summary.vertices),
+        (5, 3, cap.template.vertex_count())
+    );
+    assert!(
+        cap.initial_weights.is_none(),
+        "the trainer computes its own initial weights"
+    );
+    let truth = cap.evaluation_true_weights().unwrap().unwrap();
+    assert_eq!(
+        (truth.offsets(), truth.joints()),
+        (
+            character.deformer.skin().offsets(),
+            character.deformer.skin().joints()
+        )
+    );
+    assert!(
+        truth
+            .weights()
+            .iter()
+            .zip(character.deformer.skin().weights())
+            .all(|(a, b)| (a - b).abs() < 1e-6)
+    );
+    for &f in &cap.test_frames {
+        let gt = cap.evaluation_gt_mesh(f).unwrap();
+        let (want, _) = character.deformer.deform(&cap.poses[f]).unwrap();
+        assert_eq!(gt, want);
+    }
+    // Images carry the subject where the mask says so, and the background elsewhere.
+    for cam in 0..2 {
+        let img = cap.load_image(cam, 0).unwrap();
+        let mask = cap.load_mask(cam, 0).unwrap();
+        let inside = mask.inside.iter().filter(|&&m| m).count();
+        assert!(inside > 100, "{inside} subject pixels");
+        let mut lit = 0;
+        for (px, m) in img.rgb.iter().zip(&mask.inside) {
+            let bg = (*px - output::BACKGROUND).abs().max_element() < 0.01;
+            if *m {
+                lit += usize::from(!bg);
+            } else {
+                assert!(bg, "pixel {px} outside the mask is not background");
+            }
+        }
+        // Dark shoes in shadow may come close to the background; the subject as a whole does not.
+        assert!(
+            lit * 10 > inside * 9,
+            "{lit} of {inside} subject pixels differ from the background"
+        );
+    }
+}
+
+fn posed(character: &Character, set: &[(usize, usize, f32)]) -> skinfield_formats::Pose {
+    let s = &character.skeleton;
+    let mut offsets = Vec::new();
+    let mut k = 0;
+    for d in s.dofs() {
+        offsets.push(k);
+        k += d.count();
+    }
+    let mut angles = vec![0.0; k];
+    for &(j, axis, v) in set {
+        angles[offsets[j] + axis] = v;
+    }
+    s.pose_from_angles(Quat::IDENTITY, Vec3::ZERO, &angles)
+        .unwrap()
+}
+
+#[test]
+fn dqs_keeps_a_twisted_forearm_round_where_lbs_collapses() {
+    let s = character::build_skeleton().unwrap();
+    // Rings of points around the left forearm (axis y = 1.39, z = 0) at and beside the twist
+    // joint (x = 0.575), skinned with the true-weight rule, then twisted by 1.5 rad.
+    let (mut positions, mut normals) = (Vec::new(), Vec::new());
+    for x in [0.55f32, 0.575, 0.60] {
+        for k in 0..32 {
+            let a = std::f32::consts::TAU * k as f32 / 32.0;
+            let n = Vec3::new(0.0, a.cos(), a.sin());
+            positions.push(Vec3::new(x, 1.39, 0.0) + n * 0.037);
+            normals.push(n);
+        }
+    }
+    let skin = weights::true_weights(&s, &positions, &[]).unwrap();
+    let mut angles = vec![0.0; s.angle_count()];
+    let forearm = s.dofs()[..joint::L_FOREARM]
+        .iter()
+        .map(|d| d.count())
+        .sum::<usize>();
+    angles[forearm] = 1.5;
+    let pose = s
+        .pose_from_angles(Quat::IDENTITY, Vec3::ZERO, &angles)
+        .unwrap();
+    let (d, _) = dqs(&s, &skin, &positions, &normals, &pose).unwrap();
+    let l = lbs(&s, &skin, &positions, &pose).unwrap();
+    let radius = |p: Vec3| Vec3::new(0.0, p.y - 1.39, p.z).length();
+    // At the twist joint the weights are split about evenly: LBS averages a point and its
+    // 1.5 rad rotation, shrinking the radius towards cos(0.75) ≈ 0.73; DQS rotates it.
+    let mid = 32..64;
+    let rd = d[mid.clone()].iter().map(|p| radius(*p)).sum::<f32>() / 32.0 / 0.037;
+    let rl = l[mid].iter().map(|p| radius(*p)).sum::<f32>() / 32.0 / 0.037;
+    assert!((rd - 1.0).abs() < 0.01, "DQS radius ratio {rd}");
+    assert!(rl < 0.85, "LBS radius ratio {rl} (candy wrapper expected)");
+    assert!(d.iter().all(|p| (radius(*p) / 0.037 - 1.0).abs() < 0.01));
+}
+
+#[test]
+fn bulge_and_skirt_push_out_move_the_surface_beyond_dqs() {
+    let ch = build_character(&small()).unwrap();
+    // Elbow flexed 2 rad: skin near the elbow moves outwards, the head does not.
+    let pose = posed(&ch, &[(joint::L_ELBOW, 0, -2.0)]);
+    let (base, base_n) = ch
+        .deformer
+        .deform_with(&pose, DeformParts::DQS_ONLY)
+        .unwrap();
+    let (bulged, _) = ch
+        .deformer
+        .deform_with(
+            &pose,
+            DeformParts {
+                bulge: true,
+                skirt: false,
+            },
+        )
+        .unwrap();
+    let elbow = bind_positions(&ch.skeleton)[joint::L_ELBOW];
+    let mut near_max = 0.0f32;
+    for v in 0..base.len() {
+        let d = bulged[v] - base[v];
+        let dist = (ch.template.positions[v] - elbow).length();
+        if dist < 0.05 {
+            near_max = near_max.max(d.length());
+            assert!(d.dot(base_n[v]) >= -1e-6, "bulge must go outwards");
+        }
+        if dist > 0.4 {
+            assert!(
+                d.length() < 1e-6,
+                "vertex {v} far from the elbow moved by {}",
+                d.length()
+            );
+        }
+    }
+    assert!(near_max > 0.01, "bulge at the elbow only {near_max} m");
+
+    // Left thigh kicked forward: the skirt is pushed off the leg, and ends outside every leg.
+    let pose = posed(&ch, &[(joint::L_HIP, 0, -1.3)]);
+    let (base, _) = ch
+        .deformer
+        .deform_with(&pose, DeformParts::DQS_ONLY)
+        .unwrap();
+    let (pushed, _) = ch
+        .deformer
+        .deform_with(
+            &pose,
+            DeformParts {
+                bulge: false,
+                skirt: true,
+            },
+        )
+        .unwrap();
+    let mut world = vec![Mat4::IDENTITY; ch.skeleton.len()];
+    ch.skeleton.world_matrices(&pose, &mut world).unwrap();
+    let (hip, knee) = (
+        world[joint::L_HIP].w_axis.truncate(),
+        world[joint::L_KNEE].w_axis.truncate(),
+    );
+    let mut moved = 0.0f32;
+    let mut inside_before = 0;
+    for v in (0..base.len()).filter(|&v| ch.parts[v] == Part::Skirt) {
+        moved = moved.max((pushed[v] - base[v]).length());
+        let (d0, t0) = super::character::segment_distance(base[v], hip, knee);
+        let r = 0.078 + (0.054 - 0.078) * t0 + SKIRT_CLEARANCE;
+        inside_before += usize::from(d0 < r - 1e-3);
+        let (d, t) = super::character::segment_distance(pushed[v], hip, knee);
+        let r = 0.078 + (0.054 - 0.078) * t + SKIRT_CLEARANCE;
+        assert!(
+            d >= r - 1e-3,
+            "skirt vertex {v} inside the thigh ({d} < {r})"
+        );
+    }
+    assert!(
+        inside_before > 5,
+        "DQS alone lets the thigh pierce the skirt ({inside_before} vertices)"
+    );
+    assert!(moved > 0.02, "push-out moved the skirt by only {moved} m");
+    // Other vertices are untouched by the skirt stage.
+    for v in (0..base.len()).filter(|&v| ch.parts[v] != Part::Skirt) {
+        assert!((pushed[v] - base[v]).length() < 1e-6);
+    }
+}
+
+#[test]
+fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
+    let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
+        return;
+    };
+    let source = GltfSource {
+        character: data.join("quaternius-witch/Witch.gltf"),
+        motion: None,
+        train_clips: vec!["Walk".into()],
+        test_clips: vec!["Kick_Left".into()],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig {
+        train_frames_per_clip: 2,
+        test_frames_per_clip: 2,
+        ..SynthConfig::tiny()
+    };
+    let summary = synthesize_gltf(dir.path(), &config, &source).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    assert_eq!((summary.joints, cap.template.vertex_count()), (62, 13884));
+    assert_eq!(
+        (cap.train_frames.clone(), cap.test_frames.clone()),
+        (vec![0, 1], vec![2, 3])
+    );
+    let mask = cap.load_mask(0, 2).unwrap();
+    assert!(
+        mask.inside.iter().filter(|&&m| m).count() > 50,
+        "the witch is in view"
+    );
+    // The ground truth (DQS + bulge with the artist weights) differs from LBS with the same
+    // weights on a kick, so static LBS cannot reproduce it.
+    let weights = cap.evaluation_true_weights().unwrap().unwrap();
+    let gt = cap.evaluation_gt_mesh(2).unwrap();
+    let l = lbs(
+        &cap.skeleton,
+        &weights,
+        &cap.template.positions,
+        &cap.poses[2],
+    )
+    .unwrap();
+    let max = gt
+        .iter()
+        .zip(&l)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0f32, f32::max);
+    let height = cap.template.bounds().unwrap().size().y;
+    assert!(
+        max > 0.005 * height,
+        "GT vs LBS differ by at most {max} (height {height})"
+    );
+    // Clips from a separate motion file bind by joint name: the same file gives the same poses.
+    let by_name = GltfSource {
+        motion: Some(source.character.clone()),
+        ..source.clone()
+    };
+    let dir2 = tempfile::tempdir().unwrap();
+    synthesize_gltf(dir2.path(), &config, &by_name).unwrap();
+    let cap2 = load_capture(dir2.path()).unwrap();
+    for (a, b) in cap.poses.iter().zip(&cap2.poses) {
+        for (j, (x, y)) in a.locals.iter().zip(&b.locals).enumerate() {
+            assert!(
+                (x.translation - y.translation).length() < 1e-5
+                    && x.rotation.dot(y.rotation).abs() > 1.0 - 1e-6,
+                "{j} {} {x:?} {y:?}",
+                cap.skeleton.names()[j]
+            );
+        }
+    }
+    // Clip names are checked.
+    let bad = GltfSource {
+        test_clips: vec!["Walk".into()],
+        ..source.clone()
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &config, &bad),
+        Err(SynthError::Config {
+            field: "test_clips",
+            ..
+        })
+    ));
+    let bad = GltfSource {
+        test_clips: vec!["Moonwalk".into()],
+        ..source
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &config, &bad),
+        Err(SynthError::Config {
+            field: "test_clips",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn exr_images_carry_the_same_pixels_as_png_before_quantisation() {
+    let (png, exr) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    synthesize(png.path(), &SynthConfig::tiny()).unwrap();
+    let config = SynthConfig {
+        image_format: skinfield_formats::capture::ImageFormat::Exr,
+        ..SynthConfig::tiny()
+    };
+    synthesize(exr.path(), &config).unwrap();
+    let (a, b) = (
+        load_capture(png.path()).unwrap(),
+        load_capture(exr.path()).unwrap(),
+    );
+    assert!(b.image_path(1, 2).extension().is_some_and(|e| e == "exr"));
+    let (pa, pb) = (a.load_image(1, 2).unwrap(), b.load_image(1, 2).unwrap());
+    // 8-bit sRGB quantisation is the only difference (at most ~0.5/255 · 2.4 in linear terms near white).
+    for (x, y) in pa.rgb.iter().zip(&pb.rgb) {
+        assert!((*x - *y).abs().max_element() < 0.006, "{x} vs {y}");
+    }
+    assert!(pb.rgb.iter().any(|p| p.max_element() > 0.1));
+}
