@@ -26,6 +26,8 @@ pub mod activation;
 pub mod bind;
 pub mod error;
 pub mod frame;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod job;
 pub mod kernels;
 pub mod model;

@@ -1,0 +1,107 @@
+//! SkinNet and skinning on the GPU (wgpu compute shaders, feature `gpu`).
+//!
+//! The same steps as the CPU path (DESIGN.md "Runtime shape"), on a [`wgpu::Device`] and
+//! [`wgpu::Queue`] that the caller (the engine) owns:
+//!
+//! - [`GpuSkinner::new`] builds the pipelines once from the WGSL in `shaders/`.
+//! - [`GpuSkinner::bind_model`] copies a `.skf` SkinNet into GPU buffers (f16 weights stay f16,
+//!   packed in pairs and read with `unpack2x16float`; f32 weights stay f32).
+//! - [`GpuSkinner::bind_mesh`] uploads a mesh's canonical positions and normals and computes,
+//!   once, the position part of the two input-fed layers (layer 0 and the skip layer).
+//! - Per frame, [`GpuSkinner::upload_frame`] writes only the skinning matrices and the pose
+//!   features; [`GpuSkinner::encode`] records the pose terms, SkinNet (tiles of 16 vertices
+//!   per workgroup, activations in workgroup memory), softmax and LBS or DQS into the caller's
+//!   command encoder, writing [`GpuMesh::output`], a `STORAGE | VERTEX` buffer of
+//!   [`SkinnedVertex`] the engine can draw from.
+//! - [`GpuMesh::read_vertices`] and [`GpuMesh::read_weights`] read results back for tools and
+//!   tests.
+
+mod layout;
+mod skinner;
+
+pub use layout::{
+    GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
+    WORKGROUP_THREADS, WeightFormat, shader_source,
+};
+pub use skinner::{GpuMesh, GpuModel, GpuSkinner, Skinning, position_encoding};
+
+/// Why a GPU operation failed.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// The model exceeds what the kernels support.
+    #[error("skf: {what} = {value} exceeds the GPU kernels' maximum of {max}")]
+    Unsupported {
+        /// The configuration field.
+        what: &'static str,
+        /// Its value.
+        value: usize,
+        /// The largest supported value.
+        max: usize,
+    },
+    /// A SkinNet layer is missing from the `.skf`.
+    #[error("skf: SkinNet layer {0} is missing")]
+    MissingLayer(usize),
+    /// A SkinNet tensor has the wrong shape.
+    #[error("skf: tensor `{name}` has shape {found:?}, expected {expected:?}")]
+    TensorShape {
+        /// Tensor name.
+        name: String,
+        /// Stored dimensions.
+        found: [u32; 2],
+        /// Dimensions the configuration implies.
+        expected: [u32; 2],
+    },
+    /// An input slice has the wrong length.
+    #[error("{field}: length {len}, expected {expected}")]
+    Length {
+        /// Which input.
+        field: &'static str,
+        /// Its length.
+        len: usize,
+        /// The required length.
+        expected: usize,
+    },
+    /// A mesh without vertices.
+    #[error("mesh: no vertices")]
+    EmptyMesh,
+    /// A non-finite mesh coordinate.
+    #[error("mesh: {field}[{index}] is not finite")]
+    NonFinite {
+        /// `positions` or `normals`.
+        field: &'static str,
+        /// Vertex index.
+        index: usize,
+    },
+    /// A buffer or dispatch would exceed the device's limits.
+    #[error("{what}: {value} exceeds the device limit {limit}")]
+    TooLarge {
+        /// What is too large.
+        what: &'static str,
+        /// Requested size (bytes or workgroups).
+        value: u64,
+        /// The device limit.
+        limit: u64,
+    },
+    /// The device's limits are below what the kernels need.
+    #[error("device limit {name} = {value} is below the required {required}")]
+    DeviceLimit {
+        /// The limit's name in `wgpu::Limits`.
+        name: &'static str,
+        /// The device's value.
+        value: u64,
+        /// The kernels' requirement.
+        required: u64,
+    },
+    /// Mapping a read-back buffer failed.
+    #[error("GPU read-back: {0}")]
+    Map(#[from] wgpu::BufferAsyncError),
+    /// Reading the mapped range failed.
+    #[error("GPU read-back range: {0}")]
+    MapRange(#[from] wgpu::MapRangeError),
+    /// Waiting for the device failed.
+    #[error("GPU poll: {0}")]
+    Poll(#[from] wgpu::PollError),
+    /// The read-back callback never ran.
+    #[error("GPU read-back: the map callback was dropped")]
+    MapDropped,
+}
