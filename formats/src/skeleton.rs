@@ -159,10 +159,10 @@ impl Skeleton {
         check("parents", parents.len())?;
         check("bind_local", bind_local.len())?;
         for (j, p) in parents.iter().enumerate() {
-            if let Some(p) = *p {
-                if p >= j {
-                    return Err(SkeletonError::BadParent { joint: j, parent: p });
-                }
+            if let Some(p) = *p
+                && p >= j
+            {
+                return Err(SkeletonError::BadParent { joint: j, parent: p });
             }
         }
         for (j, t) in bind_local.iter().enumerate() {
@@ -181,10 +181,10 @@ impl Skeleton {
         let dofs = dofs.unwrap_or_else(|| alloc::vec![JointDofs::Free; n]);
         check("dofs", dofs.len())?;
         for (j, d) in dofs.iter().enumerate() {
-            if let JointDofs::Euler { axes, limits } = d {
-                if axes.is_empty() || axes.len() > 3 || limits.len() != axes.len() {
-                    return Err(SkeletonError::BadDofs(j));
-                }
+            if let JointDofs::Euler { axes, limits } = d
+                && (axes.is_empty() || axes.len() > 3 || limits.len() != axes.len())
+            {
+                return Err(SkeletonError::BadDofs(j));
             }
         }
         let mut skeleton = Self { names, parents, bind_local, inverse_bind: Vec::new(), dofs, base };

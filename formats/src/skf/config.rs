@@ -259,10 +259,12 @@ mod tests {
         assert_eq!(ModelConfig::from_bytes(&c.to_bytes()), Ok(c));
     }
 
+    type Mutation = (fn(&mut ModelConfig), &'static str);
+
     #[test]
     fn rejects_each_bad_field() {
         let good = ModelConfig::vinecs(24, [-1.0; 3], [1.0; 3]);
-        let cases: [(fn(&mut ModelConfig), &str); 9] = [
+        let cases: [Mutation; 9] = [
             (|c| c.pe_frequencies = 99, "pe_frequencies"),
             (|c| c.softplus_beta = f32::NAN, "softplus_beta"),
             (|c| c.pose_encoding = 7, "pose_encoding"),
