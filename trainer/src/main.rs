@@ -20,6 +20,8 @@ enum Command {
     Version,
     /// Describe a glTF/GLB or .skf file as one JSON object.
     Inspect(cli::inspect::Args),
+    /// World-space skinned positions of a glTF asset at clip times, computed by the runtime.
+    Pose(cli::pose::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -31,6 +33,7 @@ fn main() {
             Ok(())
         }
         Command::Inspect(args) => cli::inspect::run(args),
+        Command::Pose(args) => cli::pose::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.
