@@ -20,7 +20,10 @@ impl Reference {
     fn open(path: &Path) -> Self {
         let g = gltf::Gltf::open(path).unwrap();
         let buffers = gltf::import_buffers(&g.document, path.parent(), g.blob.clone()).unwrap();
-        Self { doc: g.document, buffers }
+        Self {
+            doc: g.document,
+            buffers,
+        }
     }
 
     /// Node locals at time `t` of animation `anim` (linear/step keys, held outside the range).
@@ -30,7 +33,11 @@ impl Reference {
             .nodes()
             .map(|n| {
                 let (tr, r, s) = n.transform().decomposed();
-                (Vec3::from(tr).as_dvec3(), DQuat::from_array(r.map(f64::from)), Vec3::from(s).as_dvec3())
+                (
+                    Vec3::from(tr).as_dvec3(),
+                    DQuat::from_array(r.map(f64::from)),
+                    Vec3::from(s).as_dvec3(),
+                )
             })
             .collect();
         let data = |b: gltf::Buffer<'_>| Some(&self.buffers[b.index()].0[..]);
@@ -40,8 +47,13 @@ impl Reference {
             let r = ch.reader(data);
             let times: Vec<f64> = r.read_inputs().unwrap().map(f64::from).collect();
             let vals: Vec<[f64; 4]> = match r.read_outputs().unwrap() {
-                O::Translations(i) | O::Scales(i) => i.map(|v| [v[0].into(), v[1].into(), v[2].into(), 0.0]).collect(),
-                O::Rotations(i) => i.into_f32().map(|v| [v[0].into(), v[1].into(), v[2].into(), v[3].into()]).collect(),
+                O::Translations(i) | O::Scales(i) => i
+                    .map(|v| [v[0].into(), v[1].into(), v[2].into(), 0.0])
+                    .collect(),
+                O::Rotations(i) => i
+                    .into_f32()
+                    .map(|v| [v[0].into(), v[1].into(), v[2].into(), v[3].into()])
+                    .collect(),
                 O::MorphTargetWeights(_) => continue,
             };
             let n = times.len();
@@ -82,7 +94,9 @@ impl Reference {
         }
         (0..locals.len())
             .map(|i| {
-                let l = |k: usize| DMat4::from_scale_rotation_translation(locals[k].2, locals[k].1, locals[k].0);
+                let l = |k: usize| {
+                    DMat4::from_scale_rotation_translation(locals[k].2, locals[k].1, locals[k].0)
+                };
                 let mut m = l(i);
                 let mut at = parent[i];
                 while let Some(p) = at {
@@ -99,16 +113,33 @@ impl Reference {
         let data = |b: gltf::Buffer<'_>| Some(&self.buffers[b.index()].0[..]);
         let mut out = Vec::new();
         for mesh in self.doc.meshes() {
-            let Some(node) = self.doc.nodes().find(|n| n.mesh().map(|m| m.index()) == Some(mesh.index()) && n.skin().is_some()) else {
+            let Some(node) = self
+                .doc
+                .nodes()
+                .find(|n| n.mesh().map(|m| m.index()) == Some(mesh.index()) && n.skin().is_some())
+            else {
                 continue;
             };
             let skin = node.skin().unwrap();
             let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
-            let ibm: Vec<DMat4> = skin.reader(data).read_inverse_bind_matrices().unwrap().map(|m| Mat4::from_cols_array_2d(&m).as_dmat4()).collect();
-            let mats: Vec<DMat4> = joints.iter().zip(&ibm).map(|(&j, b)| worlds[j] * *b).collect();
+            let ibm: Vec<DMat4> = skin
+                .reader(data)
+                .read_inverse_bind_matrices()
+                .unwrap()
+                .map(|m| Mat4::from_cols_array_2d(&m).as_dmat4())
+                .collect();
+            let mats: Vec<DMat4> = joints
+                .iter()
+                .zip(&ibm)
+                .map(|(&j, b)| worlds[j] * *b)
+                .collect();
             for p in mesh.primitives() {
                 let r = p.reader(data);
-                let pos: Vec<DVec3> = r.read_positions().unwrap().map(|p| Vec3::from(p).as_dvec3()).collect();
+                let pos: Vec<DVec3> = r
+                    .read_positions()
+                    .unwrap()
+                    .map(|p| Vec3::from(p).as_dvec3())
+                    .collect();
                 let js: Vec<[u16; 4]> = r.read_joints(0).unwrap().into_u16().collect();
                 let ws: Vec<[f32; 4]> = r.read_weights(0).unwrap().into_f32().collect();
                 for v in 0..pos.len() {
@@ -127,8 +158,15 @@ impl Reference {
 }
 
 fn trainer(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_trainer")).arg("pose").args(args).output().unwrap();
-    (out.status.code().unwrap_or(-1), String::from_utf8(out.stderr).unwrap())
+    let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
+        .arg("pose")
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stderr).unwrap(),
+    )
 }
 
 fn read_frames(path: &Path) -> Vec<(f64, Vec<DVec3>)> {
@@ -138,7 +176,18 @@ fn read_frames(path: &Path) -> Vec<(f64, Vec<DVec3>)> {
         .unwrap()
         .iter()
         .map(|f| {
-            let pos = f["positions"].as_array().unwrap().iter().map(|p| DVec3::new(p[0].as_f64().unwrap(), p[1].as_f64().unwrap(), p[2].as_f64().unwrap())).collect();
+            let pos = f["positions"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| {
+                    DVec3::new(
+                        p[0].as_f64().unwrap(),
+                        p[1].as_f64().unwrap(),
+                        p[2].as_f64().unwrap(),
+                    )
+                })
+                .collect();
             (f["time"].as_f64().unwrap(), pos)
         })
         .collect()
@@ -150,7 +199,16 @@ fn cesium_man_walk_matches_the_gltf_reference() {
     let asset = dir.join("khronos-cesiumman/CesiumMan.glb");
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("pose.json");
-    let (code, err) = trainer(&["--asset", asset.to_str().unwrap(), "--clip", "0", "--times", "0,0.37,1.0,1.5,100", "--out", out.to_str().unwrap()]);
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0,0.37,1.0,1.5,100",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     let frames = read_frames(&out);
     assert_eq!(frames.len(), 5);
@@ -160,22 +218,52 @@ fn cesium_man_walk_matches_the_gltf_reference() {
         let want = r.skinned(&r.worlds(&r.locals(0, *t)));
         assert_eq!(got.len(), want.len());
         assert_eq!(got.len(), 3273, "CesiumMan has 3273 vertices");
-        let worst = got.iter().zip(&want).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max);
+        let worst = got
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f64::max);
         assert!(worst < 1e-4, "t = {t}: worst vertex off by {worst} m");
-        moved = moved.max(got.iter().zip(&frames[0].1).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max));
+        moved = moved.max(
+            got.iter()
+                .zip(&frames[0].1)
+                .map(|(a, b)| (*a - *b).length())
+                .fold(0.0, f64::max),
+        );
     }
     // The walk moves the mesh (the comparison is not between rest poses), and a time past the
     // end holds the last key.
     assert!(moved > 0.05, "{moved}");
     let end = r.skinned(&r.worlds(&r.locals(0, 1e9)));
-    assert!(frames[4].1.iter().zip(&end).all(|(a, b)| (*a - *b).length() < 1e-4));
+    assert!(
+        frames[4]
+            .1
+            .iter()
+            .zip(&end)
+            .all(|(a, b)| (*a - *b).length() < 1e-4)
+    );
 
     // DQS: same vertex count, close to LBS for this mildly twisting walk, but not identical.
     let out_dqs = tmp.path().join("dqs.json");
-    let (code, err) = trainer(&["--asset", asset.to_str().unwrap(), "--clip", "0", "--times", "0.37", "--dqs", "--out", out_dqs.to_str().unwrap()]);
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0.37",
+        "--dqs",
+        "--out",
+        out_dqs.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     let dqs = read_frames(&out_dqs);
-    let d = dqs[0].1.iter().zip(&frames[1].1).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max);
+    let d = dqs[0]
+        .1
+        .iter()
+        .zip(&frames[1].1)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0, f64::max);
     assert!(d > 1e-6 && d < 0.05, "DQS vs LBS max difference {d}");
 }
 
@@ -193,11 +281,17 @@ fn model_weights_drive_the_matching_skin() {
     config.hidden_count = 2;
     config.hidden = [16, 16, 0, 0, 0, 0, 0, 0];
     config.skip_layer = 1;
-    let mut m = SkfModel { config, skeleton: skin.skeleton.clone(), tensors: Vec::new() };
+    let mut m = SkfModel {
+        config,
+        skeleton: skin.skeleton.clone(),
+        tensors: Vec::new(),
+    };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (i, (o, k)) in shapes.into_iter().enumerate() {
         // Deterministic, varied weights.
-        let w = (0..o * k).map(|x| (((x * 7919 + i * 31) % 200) as f32 - 100.0) / (100.0 * (k as f32).sqrt())).collect();
+        let w = (0..o * k)
+            .map(|x| (((x * 7919 + i * 31) % 200) as f32 - 100.0) / (100.0 * (k as f32).sqrt()))
+            .collect();
         m.push_layer(Net::Skin, i, w, o, k, vec![0.0; o]);
     }
     let bytes = m.to_bytes().unwrap();
@@ -205,8 +299,18 @@ fn model_weights_drive_the_matching_skin() {
     let model_path = tmp.path().join("m.skf");
     write_atomic(&model_path, &bytes).unwrap();
     let out = tmp.path().join("pose.json");
-    let (code, err) =
-        trainer(&["--asset", asset.to_str().unwrap(), "--clip", "0", "--times", "0.6", "--model", model_path.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0.6",
+        "--model",
+        model_path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     let got = &read_frames(&out)[0].1;
     // Reference: the reference's joint matrices, blended with the runtime's SkinNet weights
@@ -216,11 +320,27 @@ fn model_weights_drive_the_matching_skin() {
     let worlds = r.worlds(&r.locals(0, 0.6));
     let gskin = r.doc.skins().next().unwrap();
     let data = |b: gltf::Buffer<'_>| Some(&r.buffers[b.index()].0[..]);
-    let ibm: Vec<DMat4> = gskin.reader(data).read_inverse_bind_matrices().unwrap().map(|m| Mat4::from_cols_array_2d(&m).as_dmat4()).collect();
-    let by_name: std::collections::HashMap<String, DMat4> =
-        gskin.joints().zip(&ibm).map(|(n, b)| (n.name().map_or(format!("node_{}", n.index()), str::to_string), worlds[n.index()] * *b)).collect();
+    let ibm: Vec<DMat4> = gskin
+        .reader(data)
+        .read_inverse_bind_matrices()
+        .unwrap()
+        .map(|m| Mat4::from_cols_array_2d(&m).as_dmat4())
+        .collect();
+    let by_name: std::collections::HashMap<String, DMat4> = gskin
+        .joints()
+        .zip(&ibm)
+        .map(|(n, b)| {
+            (
+                n.name()
+                    .map_or(format!("node_{}", n.index()), str::to_string),
+                worlds[n.index()] * *b,
+            )
+        })
+        .collect();
     let pose = skinfield_formats::gltf_io::Clip::sample(&doc.clips[0], skin, 0.6);
-    let w = skinfield_runtime::SkinNetModel::weights_for_skf(&bytes, &skin.template.positions, &pose).unwrap();
+    let w =
+        skinfield_runtime::SkinNetModel::weights_for_skf(&bytes, &skin.template.positions, &pose)
+            .unwrap();
     let mut worst = 0.0f64;
     for (v, p) in skin.template.positions.iter().enumerate() {
         let mut x = DVec3::ZERO;
@@ -240,13 +360,40 @@ fn bad_input_is_one_line_naming_the_field() {
     let asset = dir.join("khronos-cesiumman/CesiumMan.glb");
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("x.json");
-    let (code, err) = trainer(&["--asset", asset.to_str().unwrap(), "--clip", "nope", "--times", "0", "--out", out.to_str().unwrap()]);
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "nope",
+        "--times",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 1);
     assert!(err.contains("--clip") && err.contains("nope"), "{err}");
-    let (code, err) = trainer(&["--asset", asset.to_str().unwrap(), "--clip", "0", "--times", "0,NaN", "--out", out.to_str().unwrap()]);
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0,NaN",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 1);
     assert!(err.contains("--times"), "{err}");
-    let (code, err) = trainer(&["--asset", "/nonexistent.glb", "--clip", "0", "--times", "0", "--out", out.to_str().unwrap()]);
+    let (code, err) = trainer(&[
+        "--asset",
+        "/nonexistent.glb",
+        "--clip",
+        "0",
+        "--times",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 1);
     assert!(err.contains("nonexistent.glb"), "{err}");
     assert!(!out.exists());

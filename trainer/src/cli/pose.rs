@@ -17,7 +17,9 @@ use serde::Serialize;
 use skinfield_formats::Pose;
 use skinfield_formats::gltf_io::{Clip, GltfDocument, GltfSkin, PrimitiveInfo, load_gltf};
 use skinfield_formats::skf::{SkfView, read_skf_file, write_atomic};
-use skinfield_runtime::{BoundMesh, FrameState, Method, Palette, Scratch, SkinJob, SkinNetModel, StaticSkinJob};
+use skinfield_runtime::{
+    BoundMesh, FrameState, Method, Palette, Scratch, SkinJob, SkinNetModel, StaticSkinJob,
+};
 
 /// Arguments of `trainer pose`.
 #[derive(clap::Args, Debug)]
@@ -29,7 +31,12 @@ pub struct Args {
     #[arg(long)]
     pub clip: String,
     /// Comma-separated times in seconds.
-    #[arg(long, value_delimiter = ',', required = true, allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_hyphen_values = true
+    )]
     pub times: Vec<f32>,
     /// A `.skf` model whose SkinNet weights replace the file's for the skin it matches.
     #[arg(long)]
@@ -60,8 +67,10 @@ pub struct Output {
 
 /// Runs the subcommand.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let doc = load_gltf(&args.asset).with_context(|| format!("loading {}", args.asset.display()))?;
-    let clip = find_clip(&doc, &args.clip).with_context(|| format!("{}: --clip", args.asset.display()))?;
+    let doc =
+        load_gltf(&args.asset).with_context(|| format!("loading {}", args.asset.display()))?;
+    let clip =
+        find_clip(&doc, &args.clip).with_context(|| format!("{}: --clip", args.asset.display()))?;
     let model = match &args.model {
         Some(p) => Some(load_model(p)?),
         None => None,
@@ -85,8 +94,12 @@ pub fn find_clip<'d>(doc: &'d GltfDocument, key: &str) -> anyhow::Result<&'d Cli
         return Ok(c);
     }
     let names: Vec<&str> = doc.clips.iter().map(|c| c.name.as_str()).collect();
-    let i: usize = key.parse().map_err(|_| anyhow!("no clip named `{key}` (clips: {names:?})"))?;
-    doc.clips.get(i).ok_or_else(|| anyhow!("clip index {i} out of range ({} clips)", doc.clips.len()))
+    let i: usize = key
+        .parse()
+        .map_err(|_| anyhow!("no clip named `{key}` (clips: {names:?})"))?;
+    doc.clips
+        .get(i)
+        .ok_or_else(|| anyhow!("clip index {i} out of range ({} clips)", doc.clips.len()))
 }
 
 /// For `model`, the skin it drives and, per model joint, the skin's joint of the same name.
@@ -101,7 +114,10 @@ fn match_model(doc: &GltfDocument, model: &SkinNetModel) -> anyhow::Result<(usiz
             return Ok((s, map));
         }
     }
-    bail!("--model: its skeleton ({} joints) matches no skin of the asset by joint names", names.len())
+    bail!(
+        "--model: its skeleton ({} joints) matches no skin of the asset by joint names",
+        names.len()
+    )
 }
 
 /// Skinned positions of every skinned primitive at each of `times`.
@@ -119,7 +135,12 @@ pub fn pose_frames(
         bail!("{}: the asset has no skin", doc.source.display());
     }
     // File order: (mesh, primitive), each with the skin that deforms it.
-    let mut order: Vec<(usize, &PrimitiveInfo)> = doc.skins.iter().enumerate().flat_map(|(s, skin)| skin.primitives.iter().map(move |p| (s, p))).collect();
+    let mut order: Vec<(usize, &PrimitiveInfo)> = doc
+        .skins
+        .iter()
+        .enumerate()
+        .flat_map(|(s, skin)| skin.primitives.iter().map(move |p| (s, p)))
+        .collect();
     order.sort_by_key(|&(s, p)| (p.mesh, p.primitive, s));
     let driven = model.map(|m| match_model(doc, m)).transpose()?;
     let bound = match (model, &driven) {
@@ -132,7 +153,9 @@ pub fn pose_frames(
         for (s, skin) in doc.skins.iter().enumerate() {
             let pose = clip.sample(skin, t);
             let out = match (model, &driven, &bound) {
-                (Some(m), Some((ms, map)), Some(mesh)) if *ms == s => skin_with_model(m, map, mesh, &pose, method)?,
+                (Some(m), Some((ms, map)), Some(mesh)) if *ms == s => {
+                    skin_with_model(m, map, mesh, &pose, method)?
+                }
                 _ => skin_static(skin, &pose, method)?,
             };
             skinned.insert(s, out);
@@ -168,8 +191,16 @@ fn skin_static(skin: &GltfSkin, pose: &Pose, method: Method) -> anyhow::Result<V
     Ok(out)
 }
 
-fn skin_with_model(model: &SkinNetModel, map: &[usize], mesh: &BoundMesh, pose: &Pose, method: Method) -> anyhow::Result<Vec<Vec3>> {
-    let reordered = Pose { locals: map.iter().map(|&j| pose.locals[j]).collect() };
+fn skin_with_model(
+    model: &SkinNetModel,
+    map: &[usize],
+    mesh: &BoundMesh,
+    pose: &Pose,
+    method: Method,
+) -> anyhow::Result<Vec<Vec3>> {
+    let reordered = Pose {
+        locals: map.iter().map(|&j| pose.locals[j]).collect(),
+    };
     let mut frame = FrameState::new(model);
     frame.set_pose(model, &reordered)?;
     let mut out = vec![Vec3::ZERO; mesh.vertex_count()];
