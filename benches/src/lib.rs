@@ -23,15 +23,22 @@ pub fn rng(seed: u64) -> ChaCha8Rng {
 #[must_use]
 pub fn skeleton(j: usize, rng: &mut ChaCha8Rng) -> Skeleton {
     let names = (0..j).map(|i| format!("joint{i}")).collect();
-    let parents = (0..j).map(|i| if i == 0 { None } else { Some((i - 1) / 2) }).collect();
+    let parents = (0..j)
+        .map(|i| if i == 0 { None } else { Some((i - 1) / 2) })
+        .collect();
     let locals = (0..j)
         .map(|i| {
-            let t = if i == 0 { Vec3::Y } else { Vec3::new(rng.random_range(-0.2..0.2), -0.15, 0.0) };
+            let t = if i == 0 {
+                Vec3::Y
+            } else {
+                Vec3::new(rng.random_range(-0.2..0.2), -0.15, 0.0)
+            };
             Transform::from_rotation_translation(Quat::IDENTITY, t)
         })
         .collect();
     // Joint names are distinct and parents precede children: construction cannot fail.
-    Skeleton::new(names, parents, locals, None, None, Mat4::IDENTITY).expect("valid fixture skeleton")
+    Skeleton::new(names, parents, locals, None, None, Mat4::IDENTITY)
+        .expect("valid fixture skeleton")
 }
 
 /// `.skf` bytes of the paper's SkinNet (hidden 256, 256, 128, 256, 256, skip at layer 2,
@@ -41,7 +48,11 @@ pub fn vinecs_skf(j: u32, seed: u64) -> Vec<u8> {
     let mut rng = rng(seed);
     let config = ModelConfig::vinecs(j, BBOX_MIN, BBOX_MAX);
     let skeleton = skeleton(j as usize, &mut rng);
-    let mut m = SkfModel { config, skeleton, tensors: Vec::new() };
+    let mut m = SkfModel {
+        config,
+        skeleton,
+        tensors: Vec::new(),
+    };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (i, (out, inp)) in shapes.into_iter().enumerate() {
         let s = (6.0 / inp as f32).sqrt();
@@ -55,7 +66,13 @@ pub fn vinecs_skf(j: u32, seed: u64) -> Vec<u8> {
 /// `n` points in the canonical box.
 #[must_use]
 pub fn points(n: usize, rng: &mut ChaCha8Rng) -> Vec<Vec3> {
-    (0..n).map(|_| Vec3::from_array(std::array::from_fn(|k| rng.random_range(BBOX_MIN[k]..BBOX_MAX[k])))).collect()
+    (0..n)
+        .map(|_| {
+            Vec3::from_array(std::array::from_fn(|k| {
+                rng.random_range(BBOX_MIN[k]..BBOX_MAX[k])
+            }))
+        })
+        .collect()
 }
 
 /// A random pose: every joint bent by up to `amount` rad.
@@ -63,7 +80,11 @@ pub fn points(n: usize, rng: &mut ChaCha8Rng) -> Vec<Vec3> {
 pub fn pose(s: &Skeleton, rng: &mut ChaCha8Rng, amount: f32) -> Pose {
     let mut pose = s.bind_pose();
     for l in &mut pose.locals {
-        let r = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * amount;
+        let r = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        ) * amount;
         l.rotation = (l.rotation * rotvec_to_quat(r)).normalize();
     }
     pose

@@ -24,7 +24,7 @@ enum Command {
     Eval(cli::eval::Args),
     /// Draw a posed mesh over a captured image, or coloured by its error against the ground truth.
     Render(cli::render::Args),
-    /// Describe a glTF/GLB or .skf file as one JSON object.
+    /// Describe a glTF/GLB, BVH, .skf file or a capture folder as one JSON object.
     Inspect(cli::inspect::Args),
     /// Bone-heat (Pinocchio) skinning weights for a glTF character, written back as glTF.
     Heat(cli::heat::Args),
@@ -32,6 +32,8 @@ enum Command {
     Train(cli::train::Args),
     /// Synthesise the built-in capture, train, export, evaluate and print the table.
     Demo(cli::demo::Args),
+    /// World-space skinned positions of a glTF asset at clip times, computed by the runtime.
+    Pose(cli::pose::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -49,6 +51,7 @@ fn main() {
         Command::Heat(args) => cli::heat::run(args),
         Command::Train(args) => cli::train::run(args),
         Command::Demo(args) => cli::demo::run(args),
+        Command::Pose(args) => cli::pose::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -1,0 +1,400 @@
+//! `trainer pose` on CesiumMan's walk against an independent glTF skinning reference written
+//! here straight on the gltf crate (its own buffer loading, node TRS sampled and slerped in f64,
+//! joint world × inverse bind, the file's JOINTS_0/WEIGHTS_0), plus the `--model` and `--dqs`
+//! paths and bad input.
+
+use std::path::Path;
+use std::process::Command;
+
+use glam::{DMat4, DQuat, DVec3, Mat4, Vec3};
+use skinfield_formats::shared_data::shared_data_dir;
+
+type Trs = (DVec3, DQuat, DVec3);
+
+struct Reference {
+    doc: gltf::Document,
+    buffers: Vec<gltf::buffer::Data>,
+}
+
+impl Reference {
+    fn open(path: &Path) -> Self {
+        let g = gltf::Gltf::open(path).unwrap();
+        let buffers = gltf::import_buffers(&g.document, path.parent(), g.blob.clone()).unwrap();
+        Self {
+            doc: g.document,
+            buffers,
+        }
+    }
+
+    /// Node locals at time `t` of animation `anim` (linear/step keys, held outside the range).
+    fn locals(&self, anim: usize, t: f64) -> Vec<Trs> {
+        let mut out: Vec<Trs> = self
+            .doc
+            .nodes()
+            .map(|n| {
+                let (tr, r, s) = n.transform().decomposed();
+                (
+                    Vec3::from(tr).as_dvec3(),
+                    DQuat::from_array(r.map(f64::from)),
+                    Vec3::from(s).as_dvec3(),
+                )
+            })
+            .collect();
+        let data = |b: gltf::Buffer<'_>| Some(&self.buffers[b.index()].0[..]);
+        let a = self.doc.animations().nth(anim).unwrap();
+        for ch in a.channels() {
+            use gltf::animation::util::ReadOutputs as O;
+            let r = ch.reader(data);
+            let times: Vec<f64> = r.read_inputs().unwrap().map(f64::from).collect();
+            let vals: Vec<[f64; 4]> = match r.read_outputs().unwrap() {
+                O::Translations(i) | O::Scales(i) => i
+                    .map(|v| [v[0].into(), v[1].into(), v[2].into(), 0.0])
+                    .collect(),
+                O::Rotations(i) => i
+                    .into_f32()
+                    .map(|v| [v[0].into(), v[1].into(), v[2].into(), v[3].into()])
+                    .collect(),
+                O::MorphTargetWeights(_) => continue,
+            };
+            let n = times.len();
+            let v = if t <= times[0] {
+                vals[0]
+            } else if t >= times[n - 1] {
+                vals[n - 1]
+            } else {
+                let k = times.iter().rposition(|&x| x <= t).unwrap();
+                let u = (t - times[k]) / (times[k + 1] - times[k]);
+                let (a, b) = (vals[k], vals[k + 1]);
+                match (ch.sampler().interpolation(), ch.target().property()) {
+                    (gltf::animation::Interpolation::Step, _) => a,
+                    (_, gltf::animation::Property::Rotation) => {
+                        let (qa, qb) = (DQuat::from_array(a), DQuat::from_array(b));
+                        qa.slerp(qb, u).to_array()
+                    }
+                    _ => [0, 1, 2, 3].map(|i| a[i] + (b[i] - a[i]) * u),
+                }
+            };
+            let node = &mut out[ch.target().node().index()];
+            match ch.target().property() {
+                gltf::animation::Property::Translation => node.0 = DVec3::new(v[0], v[1], v[2]),
+                gltf::animation::Property::Rotation => node.1 = DQuat::from_array(v).normalize(),
+                gltf::animation::Property::Scale => node.2 = DVec3::new(v[0], v[1], v[2]),
+                gltf::animation::Property::MorphTargetWeights => {}
+            }
+        }
+        out
+    }
+
+    fn worlds(&self, locals: &[Trs]) -> Vec<DMat4> {
+        let mut parent = vec![None; locals.len()];
+        for n in self.doc.nodes() {
+            for c in n.children() {
+                parent[c.index()] = Some(n.index());
+            }
+        }
+        (0..locals.len())
+            .map(|i| {
+                let l = |k: usize| {
+                    DMat4::from_scale_rotation_translation(locals[k].2, locals[k].1, locals[k].0)
+                };
+                let mut m = l(i);
+                let mut at = parent[i];
+                while let Some(p) = at {
+                    m = l(p) * m;
+                    at = parent[p];
+                }
+                m
+            })
+            .collect()
+    }
+
+    /// Skinned positions of every skinned primitive, mesh by mesh, primitive by primitive.
+    fn skinned(&self, worlds: &[DMat4]) -> Vec<DVec3> {
+        let data = |b: gltf::Buffer<'_>| Some(&self.buffers[b.index()].0[..]);
+        let mut out = Vec::new();
+        for mesh in self.doc.meshes() {
+            let Some(node) = self
+                .doc
+                .nodes()
+                .find(|n| n.mesh().map(|m| m.index()) == Some(mesh.index()) && n.skin().is_some())
+            else {
+                continue;
+            };
+            let skin = node.skin().unwrap();
+            let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+            let ibm: Vec<DMat4> = skin
+                .reader(data)
+                .read_inverse_bind_matrices()
+                .unwrap()
+                .map(|m| Mat4::from_cols_array_2d(&m).as_dmat4())
+                .collect();
+            let mats: Vec<DMat4> = joints
+                .iter()
+                .zip(&ibm)
+                .map(|(&j, b)| worlds[j] * *b)
+                .collect();
+            for p in mesh.primitives() {
+                let r = p.reader(data);
+                let pos: Vec<DVec3> = r
+                    .read_positions()
+                    .unwrap()
+                    .map(|p| Vec3::from(p).as_dvec3())
+                    .collect();
+                let js: Vec<[u16; 4]> = r.read_joints(0).unwrap().into_u16().collect();
+                let ws: Vec<[f32; 4]> = r.read_weights(0).unwrap().into_f32().collect();
+                for v in 0..pos.len() {
+                    let (mut acc, mut sum) = (DVec3::ZERO, 0.0);
+                    for k in 0..4 {
+                        let w = f64::from(ws[v][k]);
+                        acc += w * mats[usize::from(js[v][k])].transform_point3(pos[v]);
+                        sum += w;
+                    }
+                    out.push(acc / sum);
+                }
+            }
+        }
+        out
+    }
+}
+
+fn trainer(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
+        .arg("pose")
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+fn read_frames(path: &Path) -> Vec<(f64, Vec<DVec3>)> {
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+    v["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            let pos = f["positions"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| {
+                    DVec3::new(
+                        p[0].as_f64().unwrap(),
+                        p[1].as_f64().unwrap(),
+                        p[2].as_f64().unwrap(),
+                    )
+                })
+                .collect();
+            (f["time"].as_f64().unwrap(), pos)
+        })
+        .collect()
+}
+
+#[test]
+fn cesium_man_walk_matches_the_gltf_reference() {
+    let Some(dir) = shared_data_dir() else { return };
+    let asset = dir.join("khronos-cesiumman/CesiumMan.glb");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("pose.json");
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0,0.37,1.0,1.5,100",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let frames = read_frames(&out);
+    assert_eq!(frames.len(), 5);
+    let r = Reference::open(&asset);
+    let mut moved = 0.0f64;
+    for (t, got) in &frames {
+        let want = r.skinned(&r.worlds(&r.locals(0, *t)));
+        assert_eq!(got.len(), want.len());
+        assert_eq!(got.len(), 3273, "CesiumMan has 3273 vertices");
+        let worst = got
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-4, "t = {t}: worst vertex off by {worst} m");
+        moved = moved.max(
+            got.iter()
+                .zip(&frames[0].1)
+                .map(|(a, b)| (*a - *b).length())
+                .fold(0.0, f64::max),
+        );
+    }
+    // The walk moves the mesh (the comparison is not between rest poses), and a time past the
+    // end holds the last key.
+    assert!(moved > 0.05, "{moved}");
+    let end = r.skinned(&r.worlds(&r.locals(0, 1e9)));
+    assert!(
+        frames[4]
+            .1
+            .iter()
+            .zip(&end)
+            .all(|(a, b)| (*a - *b).length() < 1e-4)
+    );
+
+    // DQS: same vertex count, close to LBS for this mildly twisting walk, but not identical.
+    let out_dqs = tmp.path().join("dqs.json");
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0.37",
+        "--dqs",
+        "--out",
+        out_dqs.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let dqs = read_frames(&out_dqs);
+    let d = dqs[0]
+        .1
+        .iter()
+        .zip(&frames[1].1)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0, f64::max);
+    assert!(d > 1e-6 && d < 0.05, "DQS vs LBS max difference {d}");
+}
+
+#[test]
+fn model_weights_drive_the_matching_skin() {
+    use skinfield_formats::gltf_io::load_gltf;
+    use skinfield_formats::skf::{ModelConfig, Net, SkfModel, write_atomic};
+    let Some(dir) = shared_data_dir() else { return };
+    let asset = dir.join("khronos-cesiumman/CesiumMan.glb");
+    let doc = load_gltf(&asset).unwrap();
+    let skin = &doc.skins[0];
+    let bb = skinfield_formats::Aabb::from_points(&skin.template.positions).unwrap();
+    let j = skin.skeleton.len();
+    let mut config = ModelConfig::vinecs(j as u32, bb.min.to_array(), bb.max.to_array());
+    config.hidden_count = 2;
+    config.hidden = [16, 16, 0, 0, 0, 0, 0, 0];
+    config.skip_layer = 1;
+    let mut m = SkfModel {
+        config,
+        skeleton: skin.skeleton.clone(),
+        tensors: Vec::new(),
+    };
+    let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
+    for (i, (o, k)) in shapes.into_iter().enumerate() {
+        // Deterministic, varied weights.
+        let w = (0..o * k)
+            .map(|x| (((x * 7919 + i * 31) % 200) as f32 - 100.0) / (100.0 * (k as f32).sqrt()))
+            .collect();
+        m.push_layer(Net::Skin, i, w, o, k, vec![0.0; o]);
+    }
+    let bytes = m.to_bytes().unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let model_path = tmp.path().join("m.skf");
+    write_atomic(&model_path, &bytes).unwrap();
+    let out = tmp.path().join("pose.json");
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0.6",
+        "--model",
+        model_path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let got = &read_frames(&out)[0].1;
+    // Reference: the reference's joint matrices, blended with the runtime's SkinNet weights
+    // (checked against an f64 forward pass in the runtime's own tests) in f64. The glTF skin's
+    // joint list and the importer's skeleton order can differ: map through joint names.
+    let r = Reference::open(&asset);
+    let worlds = r.worlds(&r.locals(0, 0.6));
+    let gskin = r.doc.skins().next().unwrap();
+    let data = |b: gltf::Buffer<'_>| Some(&r.buffers[b.index()].0[..]);
+    let ibm: Vec<DMat4> = gskin
+        .reader(data)
+        .read_inverse_bind_matrices()
+        .unwrap()
+        .map(|m| Mat4::from_cols_array_2d(&m).as_dmat4())
+        .collect();
+    let by_name: std::collections::HashMap<String, DMat4> = gskin
+        .joints()
+        .zip(&ibm)
+        .map(|(n, b)| {
+            (
+                n.name()
+                    .map_or(format!("node_{}", n.index()), str::to_string),
+                worlds[n.index()] * *b,
+            )
+        })
+        .collect();
+    let pose = skinfield_formats::gltf_io::Clip::sample(&doc.clips[0], skin, 0.6);
+    let w =
+        skinfield_runtime::SkinNetModel::weights_for_skf(&bytes, &skin.template.positions, &pose)
+            .unwrap();
+    let mut worst = 0.0f64;
+    for (v, p) in skin.template.positions.iter().enumerate() {
+        let mut x = DVec3::ZERO;
+        for (k, name) in skin.skeleton.names().iter().enumerate() {
+            if let Some(m) = by_name.get(name) {
+                x += f64::from(w[v * j + k]) * m.transform_point3(p.as_dvec3());
+            }
+        }
+        worst = worst.max((x - got[v]).length());
+    }
+    assert!(worst < 1e-3, "worst {worst}");
+}
+
+#[test]
+fn bad_input_is_one_line_naming_the_field() {
+    let Some(dir) = shared_data_dir() else { return };
+    let asset = dir.join("khronos-cesiumman/CesiumMan.glb");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("x.json");
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "nope",
+        "--times",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--clip") && err.contains("nope"), "{err}");
+    let (code, err) = trainer(&[
+        "--asset",
+        asset.to_str().unwrap(),
+        "--clip",
+        "0",
+        "--times",
+        "0,NaN",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--times"), "{err}");
+    let (code, err) = trainer(&[
+        "--asset",
+        "/nonexistent.glb",
+        "--clip",
+        "0",
+        "--times",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("nonexistent.glb"), "{err}");
+    assert!(!out.exists());
+}
