@@ -104,7 +104,15 @@ impl Camera {
     /// A pinhole camera at `eye` looking at `target` with world `up`, vertical field of view
     /// `fov_y` (radians), principal point at the image centre.
     #[must_use]
-    pub fn look_at(name: &str, width: u32, height: u32, fov_y: f32, eye: Vec3, target: Vec3, up: Vec3) -> Self {
+    pub fn look_at(
+        name: &str,
+        width: u32,
+        height: u32,
+        fov_y: f32,
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+    ) -> Self {
         let forward = (target - eye).normalize();
         let right = forward.cross(up).normalize();
         let down = forward.cross(right);
@@ -150,9 +158,20 @@ impl Camera {
 
     /// Checks resolution, intrinsics and that the rotation is a rotation.
     pub fn validate(&self) -> Result<(), CameraError> {
-        let bad = |field| CameraError::BadParameter { camera: self.name.clone(), field };
-        if self.width == 0 || self.height == 0 || self.width > MAX_IMAGE_SIDE || self.height > MAX_IMAGE_SIDE {
-            return Err(CameraError::BadResolution { camera: self.name.clone(), width: self.width, height: self.height });
+        let bad = |field| CameraError::BadParameter {
+            camera: self.name.clone(),
+            field,
+        };
+        if self.width == 0
+            || self.height == 0
+            || self.width > MAX_IMAGE_SIDE
+            || self.height > MAX_IMAGE_SIDE
+        {
+            return Err(CameraError::BadResolution {
+                camera: self.name.clone(),
+                width: self.width,
+                height: self.height,
+            });
         }
         for (v, field) in [(self.fx, "fx"), (self.fy, "fy")] {
             if !(v.is_finite() && v > 0.0) {
@@ -172,7 +191,10 @@ impl Camera {
             return Err(bad("translation"));
         }
         let r = self.rotation;
-        if !r.is_finite() || !(r * r.transpose()).abs_diff_eq(Mat3::IDENTITY, 1e-3) || (r.determinant() - 1.0).abs() > 1e-3 {
+        if !r.is_finite()
+            || !(r * r.transpose()).abs_diff_eq(Mat3::IDENTITY, 1e-3)
+            || (r.determinant() - 1.0).abs() > 1e-3
+        {
             return Err(CameraError::NotARotation(self.name.clone()));
         }
         Ok(())
@@ -199,14 +221,25 @@ mod tests {
 
     #[test]
     fn look_at_projects_target_to_centre_and_up_to_smaller_y() {
-        let c = Camera::look_at("c", 200, 100, 1.0, Vec3::new(0.0, 1.0, 3.0), Vec3::new(0.0, 1.0, 0.0), Vec3::Y);
+        let c = Camera::look_at(
+            "c",
+            200,
+            100,
+            1.0,
+            Vec3::new(0.0, 1.0, 3.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::Y,
+        );
         c.validate().unwrap();
         let p = c.project(Vec3::new(0.0, 1.0, 0.0)).unwrap();
         assert!((p - Vec2::new(100.0, 50.0)).length() < 1e-4);
         let up = c.project(Vec3::new(0.0, 1.5, 0.0)).unwrap();
         assert!(up.y < 50.0);
         let right = c.project(Vec3::new(0.5, 1.0, 0.0)).unwrap();
-        assert!(right.x > 100.0, "world +X is to the right when looking down -Z");
+        assert!(
+            right.x > 100.0,
+            "world +X is to the right when looking down -Z"
+        );
         assert!((c.center() - Vec3::new(0.0, 1.0, 3.0)).length() < 1e-5);
         assert!(c.project(Vec3::new(0.0, 1.0, 4.0)).is_none());
     }
@@ -216,13 +249,25 @@ mod tests {
         let good = Camera::look_at("c", 64, 64, 1.0, Vec3::Z * 3.0, Vec3::ZERO, Vec3::Y);
         let mut c = good.clone();
         c.width = 0;
-        assert!(matches!(c.validate(), Err(CameraError::BadResolution { .. })));
+        assert!(matches!(
+            c.validate(),
+            Err(CameraError::BadResolution { .. })
+        ));
         let mut c = good.clone();
         c.fx = -1.0;
-        assert!(matches!(c.validate(), Err(CameraError::BadParameter { field: "fx", .. })));
+        assert!(matches!(
+            c.validate(),
+            Err(CameraError::BadParameter { field: "fx", .. })
+        ));
         let mut c = good.clone();
         c.distortion.k1 = f32::NAN;
-        assert!(matches!(c.validate(), Err(CameraError::BadParameter { field: "distortion", .. })));
+        assert!(matches!(
+            c.validate(),
+            Err(CameraError::BadParameter {
+                field: "distortion",
+                ..
+            })
+        ));
         let mut c = good;
         c.rotation = Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0));
         assert!(matches!(c.validate(), Err(CameraError::NotARotation(_))));

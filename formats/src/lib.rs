@@ -24,11 +24,11 @@ pub mod makehuman;
 pub mod math;
 pub mod mesh;
 pub mod pose;
+#[cfg(feature = "std")]
+pub mod shared_data;
 pub mod skeleton;
 pub mod skf;
 pub mod skin;
-#[cfg(feature = "std")]
-pub mod shared_data;
 
 pub use camera::{Camera, CameraError, CameraRig, Distortion};
 pub use math::{Aabb, Transform};

@@ -30,13 +30,20 @@ impl Transform {
     /// A transform with only a translation.
     #[must_use]
     pub fn from_translation(translation: Vec3) -> Self {
-        Self { translation, ..Self::IDENTITY }
+        Self {
+            translation,
+            ..Self::IDENTITY
+        }
     }
 
     /// A transform with only a rotation and a translation.
     #[must_use]
     pub fn from_rotation_translation(rotation: Quat, translation: Vec3) -> Self {
-        Self { translation, rotation, scale: Vec3::ONE }
+        Self {
+            translation,
+            rotation,
+            scale: Vec3::ONE,
+        }
     }
 
     /// The 4×4 matrix `T · R · S`.
@@ -49,7 +56,11 @@ impl Transform {
     #[must_use]
     pub fn from_mat4(m: &Mat4) -> Self {
         let (scale, rotation, translation) = m.to_scale_rotation_translation();
-        Self { translation, rotation: rotation.normalize(), scale }
+        Self {
+            translation,
+            rotation: rotation.normalize(),
+            scale,
+        }
     }
 
     /// True when every component is finite.
@@ -112,7 +123,10 @@ impl Aabb {
     #[must_use]
     pub fn from_points(points: &[Vec3]) -> Option<Self> {
         let first = *points.first()?;
-        let mut b = Self { min: first, max: first };
+        let mut b = Self {
+            min: first,
+            max: first,
+        };
         for p in points {
             if !p.is_finite() {
                 return None;
@@ -142,7 +156,11 @@ mod tests {
 
     #[test]
     fn rotvec_round_trip_and_shortest_arc() {
-        for r in [Vec3::new(0.3, -0.2, 0.9), Vec3::new(1e-9, 0.0, 0.0), Vec3::new(0.0, 3.0, 0.0)] {
+        for r in [
+            Vec3::new(0.3, -0.2, 0.9),
+            Vec3::new(1e-9, 0.0, 0.0),
+            Vec3::new(0.0, 3.0, 0.0),
+        ] {
             let q = rotvec_to_quat(r);
             assert!((quat_to_rotvec(q) - r).length() < 1e-5, "{r}");
             assert!((quat_to_rotvec(-q) - r).length() < 1e-5, "negated {r}");

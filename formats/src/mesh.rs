@@ -94,13 +94,24 @@ impl Template {
     pub fn validate(&self) -> Result<(), MeshError> {
         let n = self.positions.len();
         if n == 0 || self.triangles.is_empty() {
-            return Err(MeshError::Empty { vertices: n, triangles: self.triangles.len() });
+            return Err(MeshError::Empty {
+                vertices: n,
+                triangles: self.triangles.len(),
+            });
         }
         if n > MAX_VERTICES {
             return Err(MeshError::TooManyVertices(n));
         }
         let check = |field, len| {
-            if len == n { Ok(()) } else { Err(MeshError::AttributeLength { field, len, expected: n }) }
+            if len == n {
+                Ok(())
+            } else {
+                Err(MeshError::AttributeLength {
+                    field,
+                    len,
+                    expected: n,
+                })
+            }
         };
         check("normals", self.normals.len())?;
         if let Some(a) = &self.uvs {
@@ -115,16 +126,26 @@ impl Template {
         for (t, tri) in self.triangles.iter().enumerate() {
             for &v in tri {
                 if v as usize >= n {
-                    return Err(MeshError::IndexOutOfRange { triangle: t, vertex: v, vertices: n });
+                    return Err(MeshError::IndexOutOfRange {
+                        triangle: t,
+                        vertex: v,
+                        vertices: n,
+                    });
                 }
             }
         }
         for (v, (p, nrm)) in self.positions.iter().zip(&self.normals).enumerate() {
             if !p.is_finite() {
-                return Err(MeshError::NonFinite { vertex: v, field: "positions" });
+                return Err(MeshError::NonFinite {
+                    vertex: v,
+                    field: "positions",
+                });
             }
             if !nrm.is_finite() {
-                return Err(MeshError::NonFinite { vertex: v, field: "normals" });
+                return Err(MeshError::NonFinite {
+                    vertex: v,
+                    field: "normals",
+                });
             }
         }
         Ok(())
@@ -169,7 +190,9 @@ pub fn area_weighted_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<
 /// Texture coordinates are optional; this helper returns them or zeros.
 #[must_use]
 pub fn uvs_or_zero(t: &Template) -> Vec<Vec2> {
-    t.uvs.clone().unwrap_or_else(|| alloc::vec![Vec2::ZERO; t.positions.len()])
+    t.uvs
+        .clone()
+        .unwrap_or_else(|| alloc::vec![Vec2::ZERO; t.positions.len()])
 }
 
 #[cfg(test)]
@@ -204,24 +227,64 @@ mod tests {
         assert!(matches!(t.validate(), Err(MeshError::Empty { .. })));
         let mut t = good.clone();
         t.normals.pop();
-        assert!(matches!(t.validate(), Err(MeshError::AttributeLength { field: "normals", .. })));
+        assert!(matches!(
+            t.validate(),
+            Err(MeshError::AttributeLength {
+                field: "normals",
+                ..
+            })
+        ));
         let mut t = good.clone();
         t.uvs = Some(vec![Vec2::ZERO]);
-        assert!(matches!(t.validate(), Err(MeshError::AttributeLength { field: "uvs", .. })));
+        assert!(matches!(
+            t.validate(),
+            Err(MeshError::AttributeLength { field: "uvs", .. })
+        ));
         let mut t = good.clone();
         t.colors = Some(vec![]);
-        assert!(matches!(t.validate(), Err(MeshError::AttributeLength { field: "colors", .. })));
+        assert!(matches!(
+            t.validate(),
+            Err(MeshError::AttributeLength {
+                field: "colors",
+                ..
+            })
+        ));
         let mut t = good.clone();
         t.part_labels = Some(vec![PartLabel::Skin]);
-        assert!(matches!(t.validate(), Err(MeshError::AttributeLength { field: "part_labels", .. })));
+        assert!(matches!(
+            t.validate(),
+            Err(MeshError::AttributeLength {
+                field: "part_labels",
+                ..
+            })
+        ));
         let mut t = good.clone();
         t.triangles[1][2] = 4;
-        assert!(matches!(t.validate(), Err(MeshError::IndexOutOfRange { triangle: 1, vertex: 4, .. })));
+        assert!(matches!(
+            t.validate(),
+            Err(MeshError::IndexOutOfRange {
+                triangle: 1,
+                vertex: 4,
+                ..
+            })
+        ));
         let mut t = good.clone();
         t.positions[2].y = f32::INFINITY;
-        assert!(matches!(t.validate(), Err(MeshError::NonFinite { vertex: 2, field: "positions" })));
+        assert!(matches!(
+            t.validate(),
+            Err(MeshError::NonFinite {
+                vertex: 2,
+                field: "positions"
+            })
+        ));
         let mut t = good;
         t.normals[3].x = f32::NAN;
-        assert!(matches!(t.validate(), Err(MeshError::NonFinite { vertex: 3, field: "normals" })));
+        assert!(matches!(
+            t.validate(),
+            Err(MeshError::NonFinite {
+                vertex: 3,
+                field: "normals"
+            })
+        ));
     }
 }

@@ -95,15 +95,27 @@ pub const fn pose_feature_count(joints: usize) -> usize {
 ///   `R = (B·q)(B·b)⁻¹` with `B` the skeleton base rotation, with its heading (twist about the
 ///   world up axis) removed: `log(twist⁻¹ · R)`;
 /// - translations are dropped.
-pub fn pose_features(skeleton: &Skeleton, pose: &Pose, up: UpAxis, out: &mut [f32]) -> Result<(), PoseError> {
+pub fn pose_features(
+    skeleton: &Skeleton,
+    pose: &Pose,
+    up: UpAxis,
+    out: &mut [f32],
+) -> Result<(), PoseError> {
     skeleton.check_pose(pose)?;
     let expected = pose_feature_count(skeleton.len());
     if out.len() != expected {
-        return Err(PoseError::OutputLength { len: out.len(), expected });
+        return Err(PoseError::OutputLength {
+            len: out.len(),
+            expected,
+        });
     }
     let base_rotation = Transform::from_mat4(&skeleton.base()).rotation;
-    for (j, ((local, bind), parent)) in
-        pose.locals.iter().zip(skeleton.bind_local()).zip(skeleton.parents()).enumerate()
+    for (j, ((local, bind), parent)) in pose
+        .locals
+        .iter()
+        .zip(skeleton.bind_local())
+        .zip(skeleton.parents())
+        .enumerate()
     {
         let q = local.rotation.normalize();
         let rel = match parent {
@@ -160,21 +172,33 @@ mod tests {
         let mut f = [0.0; 6];
         pose_features(&s, &pose, UpAxis::Y, &mut f).unwrap();
         assert!(f[..3].iter().all(|v| v.abs() < 1e-5), "root {f:?}");
-        assert!((Vec3::from_slice(&f[3..]) - Vec3::new(0.7, 0.0, 0.0)).length() < 1e-5, "{f:?}");
+        assert!(
+            (Vec3::from_slice(&f[3..]) - Vec3::new(0.7, 0.0, 0.0)).length() < 1e-5,
+            "{f:?}"
+        );
         // A root tilt (about X, not the up axis) is kept.
         pose.locals[0].rotation = Quat::from_rotation_x(0.25) * s.bind_local()[0].rotation;
         pose_features(&s, &pose, UpAxis::Y, &mut f).unwrap();
-        assert!((Vec3::from_slice(&f[..3]) - Vec3::new(0.25, 0.0, 0.0)).length() < 1e-5, "{f:?}");
+        assert!(
+            (Vec3::from_slice(&f[..3]) - Vec3::new(0.25, 0.0, 0.0)).length() < 1e-5,
+            "{f:?}"
+        );
     }
 
     #[test]
     fn errors_on_bad_input() {
         let s = two_joint();
         let mut f = [0.0; 5];
-        assert!(matches!(pose_features(&s, &s.bind_pose(), UpAxis::Y, &mut f), Err(PoseError::OutputLength { .. })));
+        assert!(matches!(
+            pose_features(&s, &s.bind_pose(), UpAxis::Y, &mut f),
+            Err(PoseError::OutputLength { .. })
+        ));
         let mut pose = s.bind_pose();
         pose.locals[0].rotation = Quat::from_xyzw(f32::NAN, 0.0, 0.0, 1.0);
         let mut f = [0.0; 6];
-        assert!(matches!(pose_features(&s, &pose, UpAxis::Y, &mut f), Err(PoseError::Skeleton(_))));
+        assert!(matches!(
+            pose_features(&s, &pose, UpAxis::Y, &mut f),
+            Err(PoseError::Skeleton(_))
+        ));
     }
 }

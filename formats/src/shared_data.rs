@@ -12,16 +12,24 @@ use std::path::PathBuf;
 /// `SKINFIELD_SHARED_DATA` overrides the location.
 #[must_use]
 pub fn shared_data_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("SKINFIELD_SHARED_DATA").map(PathBuf::from).unwrap_or_else(|| {
-        // formats/ → repository root → its parent → shared/data
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
-    });
+    let dir = std::env::var_os("SKINFIELD_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            // formats/ → repository root → its parent → shared/data
+            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data")
+        });
     if dir.is_dir() {
         return Some(dir);
     }
     if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("CI=true but the shared test data folder {} is missing", dir.display());
+        panic!(
+            "CI=true but the shared test data folder {} is missing",
+            dir.display()
+        );
     }
-    eprintln!("skipping: shared test data not found at {} (set SKINFIELD_SHARED_DATA)", dir.display());
+    eprintln!(
+        "skipping: shared test data not found at {} (set SKINFIELD_SHARED_DATA)",
+        dir.display()
+    );
     None
 }

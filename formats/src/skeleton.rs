@@ -68,10 +68,11 @@ impl JointDofs {
     pub fn rotation(&self, angles: &[f32]) -> Quat {
         match self {
             JointDofs::Free => rotvec_to_quat(Vec3::new(angles[0], angles[1], angles[2])),
-            JointDofs::Euler { axes, .. } => axes
-                .iter()
-                .zip(angles)
-                .fold(Quat::IDENTITY, |q, (a, &t)| q * Quat::from_axis_angle(a.unit(), t)),
+            JointDofs::Euler { axes, .. } => {
+                axes.iter().zip(angles).fold(Quat::IDENTITY, |q, (a, &t)| {
+                    q * Quat::from_axis_angle(a.unit(), t)
+                })
+            }
             JointDofs::Fixed => Quat::IDENTITY,
         }
     }
@@ -154,7 +155,15 @@ impl Skeleton {
             return Err(SkeletonError::TooManyJoints(n));
         }
         let check = |field, len| {
-            if len == n { Ok(()) } else { Err(SkeletonError::LengthMismatch { field, len, expected: n }) }
+            if len == n {
+                Ok(())
+            } else {
+                Err(SkeletonError::LengthMismatch {
+                    field,
+                    len,
+                    expected: n,
+                })
+            }
         };
         check("parents", parents.len())?;
         check("bind_local", bind_local.len())?;
@@ -162,16 +171,25 @@ impl Skeleton {
             if let Some(p) = *p
                 && p >= j
             {
-                return Err(SkeletonError::BadParent { joint: j, parent: p });
+                return Err(SkeletonError::BadParent {
+                    joint: j,
+                    parent: p,
+                });
             }
         }
         for (j, t) in bind_local.iter().enumerate() {
             if !t.is_finite() {
-                return Err(SkeletonError::NonFinite { joint: j, field: "bind_local" });
+                return Err(SkeletonError::NonFinite {
+                    joint: j,
+                    field: "bind_local",
+                });
             }
         }
         if !base.is_finite() {
-            return Err(SkeletonError::NonFinite { joint: 0, field: "base" });
+            return Err(SkeletonError::NonFinite {
+                joint: 0,
+                field: "base",
+            });
         }
         for (i, a) in names.iter().enumerate() {
             if names[..i].contains(a) {
@@ -187,7 +205,14 @@ impl Skeleton {
                 return Err(SkeletonError::BadDofs(j));
             }
         }
-        let mut skeleton = Self { names, parents, bind_local, inverse_bind: Vec::new(), dofs, base };
+        let mut skeleton = Self {
+            names,
+            parents,
+            bind_local,
+            inverse_bind: Vec::new(),
+            dofs,
+            base,
+        };
         let inverse_bind = match inverse_bind {
             Some(ibm) => {
                 check("inverse_bind", ibm.len())?;
@@ -201,7 +226,10 @@ impl Skeleton {
         };
         for (j, m) in inverse_bind.iter().enumerate() {
             if !m.is_finite() {
-                return Err(SkeletonError::NonFinite { joint: j, field: "inverse_bind" });
+                return Err(SkeletonError::NonFinite {
+                    joint: j,
+                    field: "inverse_bind",
+                });
             }
         }
         skeleton.inverse_bind = inverse_bind;
@@ -284,13 +312,19 @@ impl Skeleton {
 
     /// Children of `joint`, in joint order.
     pub fn children(&self, joint: usize) -> impl Iterator<Item = usize> + '_ {
-        self.parents.iter().enumerate().filter(move |(_, p)| **p == Some(joint)).map(|(c, _)| c)
+        self.parents
+            .iter()
+            .enumerate()
+            .filter(move |(_, p)| **p == Some(joint))
+            .map(|(c, _)| c)
     }
 
     /// The bind pose as a [`Pose`].
     #[must_use]
     pub fn bind_pose(&self) -> Pose {
-        Pose { locals: self.bind_local.clone() }
+        Pose {
+            locals: self.bind_local.clone(),
+        }
     }
 
     /// A pose from joint angles: each joint's rotation is its bind rotation times
@@ -338,7 +372,11 @@ impl Skeleton {
     pub fn world_matrices(&self, pose: &Pose, out: &mut [Mat4]) -> Result<(), SkeletonError> {
         self.check_pose(pose)?;
         if out.len() != self.len() {
-            return Err(SkeletonError::LengthMismatch { field: "out", len: out.len(), expected: self.len() });
+            return Err(SkeletonError::LengthMismatch {
+                field: "out",
+                len: out.len(),
+                expected: self.len(),
+            });
         }
         self.world_matrices_of(&pose.locals, out);
         Ok(())
@@ -364,7 +402,10 @@ impl Skeleton {
         }
         for (j, t) in pose.locals.iter().enumerate() {
             if !t.is_finite() {
-                return Err(SkeletonError::NonFinite { joint: j, field: "pose.locals" });
+                return Err(SkeletonError::NonFinite {
+                    joint: j,
+                    field: "pose.locals",
+                });
             }
         }
         Ok(())
@@ -408,7 +449,9 @@ mod tests {
         let s = chain();
         let mut angles = vec![0.0; 9];
         angles[5] = core::f32::consts::FRAC_PI_2; // mid: rotation vector about Z
-        let pose = s.pose_from_angles(Quat::IDENTITY, Vec3::ZERO, &angles).unwrap();
+        let pose = s
+            .pose_from_angles(Quat::IDENTITY, Vec3::ZERO, &angles)
+            .unwrap();
         let mut w = vec![Mat4::ZERO; 3];
         s.world_matrices(&pose, &mut w).unwrap();
         // tip is 0.5 above mid; a +90° turn about Z sends +Y to -X.
@@ -423,31 +466,115 @@ mod tests {
         let e = Skeleton::new(vec![], vec![], vec![], None, None, Mat4::IDENTITY);
         assert_eq!(e, Err(SkeletonError::Empty));
         let e = Skeleton::new(n(2), vec![None], vec![t; 2], None, None, Mat4::IDENTITY);
-        assert!(matches!(e, Err(SkeletonError::LengthMismatch { field: "parents", .. })));
-        let e = Skeleton::new(n(2), vec![Some(1), None], vec![t; 2], None, None, Mat4::IDENTITY);
-        assert!(matches!(e, Err(SkeletonError::BadParent { joint: 0, parent: 1 })));
+        assert!(matches!(
+            e,
+            Err(SkeletonError::LengthMismatch {
+                field: "parents",
+                ..
+            })
+        ));
+        let e = Skeleton::new(
+            n(2),
+            vec![Some(1), None],
+            vec![t; 2],
+            None,
+            None,
+            Mat4::IDENTITY,
+        );
+        assert!(matches!(
+            e,
+            Err(SkeletonError::BadParent {
+                joint: 0,
+                parent: 1
+            })
+        ));
         let mut bad = t;
         bad.translation.x = f32::NAN;
         let e = Skeleton::new(n(1), vec![None], vec![bad], None, None, Mat4::IDENTITY);
-        assert!(matches!(e, Err(SkeletonError::NonFinite { field: "bind_local", .. })));
-        let e = Skeleton::new(vec!["a".into(), "a".into()], vec![None, Some(0)], vec![t; 2], None, None, Mat4::IDENTITY);
+        assert!(matches!(
+            e,
+            Err(SkeletonError::NonFinite {
+                field: "bind_local",
+                ..
+            })
+        ));
+        let e = Skeleton::new(
+            vec!["a".into(), "a".into()],
+            vec![None, Some(0)],
+            vec![t; 2],
+            None,
+            None,
+            Mat4::IDENTITY,
+        );
         assert!(matches!(e, Err(SkeletonError::DuplicateName(_))));
-        let e = Skeleton::new(n(1), vec![None], vec![t], Some(vec![]), None, Mat4::IDENTITY);
-        assert!(matches!(e, Err(SkeletonError::LengthMismatch { field: "inverse_bind", .. })));
-        let e = Skeleton::new(n(1), vec![None], vec![t], Some(vec![Mat4::NAN]), None, Mat4::IDENTITY);
-        assert!(matches!(e, Err(SkeletonError::NonFinite { field: "inverse_bind", .. })));
-        let bad_dofs = vec![JointDofs::Euler { axes: vec![], limits: vec![] }];
-        let e = Skeleton::new(n(1), vec![None], vec![t], None, Some(bad_dofs), Mat4::IDENTITY);
+        let e = Skeleton::new(
+            n(1),
+            vec![None],
+            vec![t],
+            Some(vec![]),
+            None,
+            Mat4::IDENTITY,
+        );
+        assert!(matches!(
+            e,
+            Err(SkeletonError::LengthMismatch {
+                field: "inverse_bind",
+                ..
+            })
+        ));
+        let e = Skeleton::new(
+            n(1),
+            vec![None],
+            vec![t],
+            Some(vec![Mat4::NAN]),
+            None,
+            Mat4::IDENTITY,
+        );
+        assert!(matches!(
+            e,
+            Err(SkeletonError::NonFinite {
+                field: "inverse_bind",
+                ..
+            })
+        ));
+        let bad_dofs = vec![JointDofs::Euler {
+            axes: vec![],
+            limits: vec![],
+        }];
+        let e = Skeleton::new(
+            n(1),
+            vec![None],
+            vec![t],
+            None,
+            Some(bad_dofs),
+            Mat4::IDENTITY,
+        );
         assert_eq!(e, Err(SkeletonError::BadDofs(0)));
-        let e = Skeleton::new(n(MAX_JOINTS + 1), vec![None; MAX_JOINTS + 1], vec![t; MAX_JOINTS + 1], None, None, Mat4::IDENTITY);
+        let e = Skeleton::new(
+            n(MAX_JOINTS + 1),
+            vec![None; MAX_JOINTS + 1],
+            vec![t; MAX_JOINTS + 1],
+            None,
+            None,
+            Mat4::IDENTITY,
+        );
         assert!(matches!(e, Err(SkeletonError::TooManyJoints(_))));
         let s = chain();
         let mut pose = s.bind_pose();
         pose.locals[1].rotation.x = f32::NAN;
         let mut out = vec![Mat4::ZERO; 3];
-        assert!(matches!(s.world_matrices(&pose, &mut out), Err(SkeletonError::NonFinite { joint: 1, .. })));
+        assert!(matches!(
+            s.world_matrices(&pose, &mut out),
+            Err(SkeletonError::NonFinite { joint: 1, .. })
+        ));
         pose.locals.pop();
-        assert!(matches!(s.world_matrices(&pose, &mut out), Err(SkeletonError::LengthMismatch { .. })));
-        assert!(s.pose_from_angles(Quat::IDENTITY, Vec3::ZERO, &[0.0]).is_err());
+        assert!(matches!(
+            s.world_matrices(&pose, &mut out),
+            Err(SkeletonError::LengthMismatch { .. })
+        ));
+        assert!(
+            s.pose_from_angles(Quat::IDENTITY, Vec3::ZERO, &[0.0])
+                .is_err()
+        );
     }
 }

@@ -54,9 +54,17 @@ impl StaticSkin {
     /// `joints[offsets[v]..offsets[v+1]]` with `weights[..]` alike. Zero weights are kept (they
     /// cost nothing and keep the caller's layout); a vertex whose weights do not sum to one
     /// within 1e-3 is normalised and counted in [`StaticSkin::unnormalized_count`].
-    pub fn new(offsets: Vec<u32>, joints: Vec<u32>, mut weights: Vec<f32>, joint_count: usize) -> Result<Self, SkinError> {
+    pub fn new(
+        offsets: Vec<u32>,
+        joints: Vec<u32>,
+        mut weights: Vec<f32>,
+        joint_count: usize,
+    ) -> Result<Self, SkinError> {
         if joints.len() != weights.len() {
-            return Err(SkinError::LengthMismatch { joints: joints.len(), weights: weights.len() });
+            return Err(SkinError::LengthMismatch {
+                joints: joints.len(),
+                weights: weights.len(),
+            });
         }
         if offsets.first() != Some(&0) {
             return Err(SkinError::BadOffsets(0));
@@ -73,11 +81,18 @@ impl StaticSkin {
             let mut sum = 0.0f64;
             for k in a..b {
                 if joints[k] as usize >= joint_count {
-                    return Err(SkinError::JointOutOfRange { vertex: v, joint: joints[k], joint_count });
+                    return Err(SkinError::JointOutOfRange {
+                        vertex: v,
+                        joint: joints[k],
+                        joint_count,
+                    });
                 }
                 let w = weights[k];
                 if !(w.is_finite() && w >= 0.0) {
-                    return Err(SkinError::BadWeight { vertex: v, weight: w });
+                    return Err(SkinError::BadWeight {
+                        vertex: v,
+                        weight: w,
+                    });
                 }
                 sum += f64::from(w);
             }
@@ -91,7 +106,13 @@ impl StaticSkin {
                 *w = (f64::from(*w) / sum) as f32;
             }
         }
-        Ok(Self { offsets, joints, weights, joint_count, unnormalized })
+        Ok(Self {
+            offsets,
+            joints,
+            weights,
+            joint_count,
+            unnormalized,
+        })
     }
 
     /// Builds a skin from a dense `vertices × joint_count` row-major matrix, dropping zeros.
@@ -154,7 +175,11 @@ impl StaticSkin {
     /// Largest number of stored influences on any vertex.
     #[must_use]
     pub fn max_influences(&self) -> usize {
-        self.offsets.windows(2).map(|w| (w[1] - w[0]) as usize).max().unwrap_or(0)
+        self.offsets
+            .windows(2)
+            .map(|w| (w[1] - w[0]) as usize)
+            .max()
+            .unwrap_or(0)
     }
 
     /// How many vertices had weights that did not sum to one in the input.
@@ -195,14 +220,41 @@ mod tests {
 
     #[test]
     fn rejects_every_invalid_configuration() {
-        assert!(matches!(StaticSkin::new(vec![0, 1], vec![0], vec![], 1), Err(SkinError::LengthMismatch { .. })));
-        assert!(matches!(StaticSkin::new(vec![1, 1], vec![0], vec![1.0], 1), Err(SkinError::BadOffsets(0))));
-        assert!(matches!(StaticSkin::new(vec![0, 2], vec![0], vec![1.0], 1), Err(SkinError::BadOffsets(_))));
-        assert!(matches!(StaticSkin::new(vec![0, 1, 0, 1], vec![0], vec![1.0], 1), Err(SkinError::BadOffsets(1))));
-        assert!(matches!(StaticSkin::new(vec![0, 1], vec![3], vec![1.0], 2), Err(SkinError::JointOutOfRange { joint: 3, .. })));
-        assert!(matches!(StaticSkin::new(vec![0, 1], vec![0], vec![f32::NAN], 1), Err(SkinError::BadWeight { .. })));
-        assert!(matches!(StaticSkin::new(vec![0, 1], vec![0], vec![-1.0], 1), Err(SkinError::BadWeight { .. })));
-        assert!(matches!(StaticSkin::new(vec![0, 1], vec![0], vec![0.0], 1), Err(SkinError::NoInfluence(0))));
-        assert!(matches!(StaticSkin::new(vec![0, 0], vec![], vec![], 1), Err(SkinError::NoInfluence(0))));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 1], vec![0], vec![], 1),
+            Err(SkinError::LengthMismatch { .. })
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![1, 1], vec![0], vec![1.0], 1),
+            Err(SkinError::BadOffsets(0))
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 2], vec![0], vec![1.0], 1),
+            Err(SkinError::BadOffsets(_))
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 1, 0, 1], vec![0], vec![1.0], 1),
+            Err(SkinError::BadOffsets(1))
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 1], vec![3], vec![1.0], 2),
+            Err(SkinError::JointOutOfRange { joint: 3, .. })
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 1], vec![0], vec![f32::NAN], 1),
+            Err(SkinError::BadWeight { .. })
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 1], vec![0], vec![-1.0], 1),
+            Err(SkinError::BadWeight { .. })
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 1], vec![0], vec![0.0], 1),
+            Err(SkinError::NoInfluence(0))
+        ));
+        assert!(matches!(
+            StaticSkin::new(vec![0, 0], vec![], vec![], 1),
+            Err(SkinError::NoInfluence(0))
+        ));
     }
 }

@@ -138,9 +138,21 @@ impl ModelConfig {
         let widths = self.hidden_widths();
         let n = widths.len();
         (0..=n).map(move |i| {
-            let out = if i < n { widths[i] as usize } else { self.output_width(net) };
-            let prev = if i == 0 { input } else { widths[i - 1] as usize };
-            let inp = if i == self.skip_layer as usize && i > 0 { prev + input } else { prev };
+            let out = if i < n {
+                widths[i] as usize
+            } else {
+                self.output_width(net)
+            };
+            let prev = if i == 0 {
+                input
+            } else {
+                widths[i - 1] as usize
+            };
+            let inp = if i == self.skip_layer as usize && i > 0 {
+                prev + input
+            } else {
+                prev
+            };
             (out, inp)
         })
     }
@@ -170,7 +182,11 @@ impl ModelConfig {
             return bad("hidden_count");
         }
         let n = self.hidden_count as usize;
-        if self.hidden[..n].iter().any(|&w| w == 0 || w > MAX_LAYER_WIDTH) || self.hidden[n..].iter().any(|&w| w != 0) {
+        if self.hidden[..n]
+            .iter()
+            .any(|&w| w == 0 || w > MAX_LAYER_WIDTH)
+            || self.hidden[n..].iter().any(|&w| w != 0)
+        {
             return bad("hidden");
         }
         if self.skip_layer as usize >= n {
@@ -252,7 +268,17 @@ mod tests {
         let c = ModelConfig::vinecs(24, [-1.0; 3], [1.0; 3]);
         c.validate().unwrap();
         let shapes: alloc::vec::Vec<_> = c.layer_shapes(Net::Skin).collect();
-        assert_eq!(shapes, [(256, 111), (256, 256), (128, 367), (256, 128), (256, 256), (24, 256)]);
+        assert_eq!(
+            shapes,
+            [
+                (256, 111),
+                (256, 256),
+                (128, 367),
+                (256, 128),
+                (256, 256),
+                (24, 256)
+            ]
+        );
         // DESIGN.md: ≈ 0.49 MFLOP per vertex for J = 24, L = 6.
         let mflop = 2.0 * c.macs_per_vertex(Net::Skin) as f64 / 1e6;
         assert!((mflop - 0.49).abs() < 0.01, "{mflop}");
@@ -279,13 +305,22 @@ mod tests {
             let mut c = good;
             mutate(&mut c);
             assert_eq!(c.validate(), Err(SkfConfigError::BadField(field)));
-            assert_eq!(ModelConfig::from_bytes(&c.to_bytes()), Err(SkfConfigError::BadField(field)));
+            assert_eq!(
+                ModelConfig::from_bytes(&c.to_bytes()),
+                Err(SkfConfigError::BadField(field))
+            );
         }
         let mut b = good.to_bytes();
         b[12] = 9;
-        assert_eq!(ModelConfig::from_bytes(&b), Err(SkfConfigError::BadField("up_axis")));
+        assert_eq!(
+            ModelConfig::from_bytes(&b),
+            Err(SkfConfigError::BadField("up_axis"))
+        );
         let mut b = good.to_bytes();
         b[100] = 1;
-        assert_eq!(ModelConfig::from_bytes(&b), Err(SkfConfigError::BadField("reserved")));
+        assert_eq!(
+            ModelConfig::from_bytes(&b),
+            Err(SkfConfigError::BadField("reserved"))
+        );
     }
 }

@@ -296,7 +296,9 @@ impl<'a> TensorView<'a> {
     #[must_use]
     pub fn get(&self, i: usize) -> Option<f32> {
         let s = self.dtype.size();
-        let b = self.bytes.get(i.checked_mul(s)?..i.checked_mul(s)?.checked_add(s)?)?;
+        let b = self
+            .bytes
+            .get(i.checked_mul(s)?..i.checked_mul(s)?.checked_add(s)?)?;
         Some(match self.dtype {
             Dtype::F16 => f16::from_le_bytes([b[0], b[1]]).to_f32(),
             Dtype::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
@@ -306,7 +308,10 @@ impl<'a> TensorView<'a> {
     /// Expands every element to f32 into `out` (length = [`TensorView::len`]).
     pub fn to_f32(&self, out: &mut [f32]) -> Result<(), SkfError> {
         if out.len() != self.len() {
-            return Err(SkfError::OutputLength { len: out.len(), expected: self.len() });
+            return Err(SkfError::OutputLength {
+                len: out.len(),
+                expected: self.len(),
+            });
         }
         match self.dtype {
             Dtype::F16 => {
@@ -436,7 +441,10 @@ fn le_f32(b: &[u8], at: usize) -> f32 {
 /// Checks that `[start, end)` is fewer than [`ALIGN`] zero bytes.
 fn check_padding(bytes: &[u8], start: usize, end: usize) -> Result<(), SkfError> {
     if end < start || end - start >= ALIGN || bytes[start..end].iter().any(|&b| b != 0) {
-        return Err(SkfError::Uncovered { offset: start as u64, len: end.saturating_sub(start) as u64 });
+        return Err(SkfError::Uncovered {
+            offset: start as u64,
+            len: end.saturating_sub(start) as u64,
+        });
     }
     Ok(())
 }
@@ -447,7 +455,10 @@ impl<'a> SkfView<'a> {
     pub fn parse(bytes: &'a [u8]) -> Result<Self, SkfError> {
         let len = bytes.len() as u64;
         if bytes.len() < HEADER_LEN {
-            return Err(SkfError::Truncated { needed: HEADER_LEN as u64, len });
+            return Err(SkfError::Truncated {
+                needed: HEADER_LEN as u64,
+                len,
+            });
         }
         if bytes[..8] != MAGIC {
             return Err(SkfError::BadMagic);
@@ -463,9 +474,15 @@ impl<'a> SkfView<'a> {
         }
         if declared != len {
             return Err(if declared > len {
-                SkfError::Truncated { needed: declared, len }
+                SkfError::Truncated {
+                    needed: declared,
+                    len,
+                }
             } else {
-                SkfError::LengthMismatch { declared, actual: len }
+                SkfError::LengthMismatch {
+                    declared,
+                    actual: len,
+                }
             });
         }
         let stored = le_u64(bytes, 24);
@@ -482,22 +499,34 @@ impl<'a> SkfView<'a> {
         // Bounded by MAX_SECTIONS: cannot overflow.
         let table_end = HEADER_LEN + SECTION_ENTRY_LEN * section_count as usize;
         if bytes.len() < table_end {
-            return Err(SkfError::Truncated { needed: table_end as u64, len });
+            return Err(SkfError::Truncated {
+                needed: table_end as u64,
+                len,
+            });
         }
         let mut found: [Option<&[u8]>; 4] = [None; 4];
         let mut cursor = table_end;
         for s in 0..section_count as usize {
-            let e = &bytes[HEADER_LEN + s * SECTION_ENTRY_LEN..HEADER_LEN + (s + 1) * SECTION_ENTRY_LEN];
+            let e = &bytes
+                [HEADER_LEN + s * SECTION_ENTRY_LEN..HEADER_LEN + (s + 1) * SECTION_ENTRY_LEN];
             let tag = Tag([e[0], e[1], e[2], e[3]]);
             let (offset, slen) = (le_u64(e, 8), le_u64(e, 16));
             if le_u32(e, 4) != 0 || le_u64(e, 24) != 0 {
-                return Err(SkfError::ReservedNonZero((HEADER_LEN + s * SECTION_ENTRY_LEN) as u64));
+                return Err(SkfError::ReservedNonZero(
+                    (HEADER_LEN + s * SECTION_ENTRY_LEN) as u64,
+                ));
             }
-            let end = offset.checked_add(slen).filter(|&end| end <= len).ok_or(SkfError::SectionOutOfBounds { tag })?;
+            let end = offset
+                .checked_add(slen)
+                .filter(|&end| end <= len)
+                .ok_or(SkfError::SectionOutOfBounds { tag })?;
             // Both fit in usize: they are <= len.
             let (offset, end) = (offset as usize, end as usize);
             if offset % ALIGN != 0 || offset < cursor {
-                return Err(SkfError::SectionPlacement { tag, offset: offset as u64 });
+                return Err(SkfError::SectionPlacement {
+                    tag,
+                    offset: offset as u64,
+                });
             }
             check_padding(bytes, cursor, offset)?;
             cursor = end;
@@ -514,19 +543,32 @@ impl<'a> SkfView<'a> {
             found[slot] = Some(&bytes[offset..end]);
         }
         if cursor != bytes.len() {
-            return Err(SkfError::Uncovered { offset: cursor as u64, len: len - cursor as u64 });
+            return Err(SkfError::Uncovered {
+                offset: cursor as u64,
+                len: len - cursor as u64,
+            });
         }
         let tags = [tag::CONF, tag::SKEL, tag::TINF, tag::DATA];
         let get = |k: usize| found[k].ok_or(SkfError::MissingSection(Tag(tags[k])));
         let (conf, skel, tinf, data) = (get(0)?, get(1)?, get(2)?, get(3)?);
 
         if conf.len() != CONF_LEN {
-            return Err(SkfError::SectionLength { tag: Tag(tag::CONF), len: conf.len() as u64, expected: CONF_LEN as u64 });
+            return Err(SkfError::SectionLength {
+                tag: Tag(tag::CONF),
+                len: conf.len() as u64,
+                expected: CONF_LEN as u64,
+            });
         }
         let config = ModelConfig::from_bytes(conf)?;
         let skeleton = Self::parse_skeleton(skel, &config)?;
         let table = Self::parse_table(tinf, data)?;
-        let view = Self { config, skeleton, table, data, minor };
+        let view = Self {
+            config,
+            skeleton,
+            table,
+            data,
+            minor,
+        };
         for net in [Net::Skin, Net::Albedo, Net::Shadow] {
             if config.nets & net.bit() != 0 {
                 view.check_net(net)?;
@@ -538,7 +580,11 @@ impl<'a> SkfView<'a> {
     fn parse_skeleton(skel: &'a [u8], config: &ModelConfig) -> Result<SkeletonView<'a>, SkfError> {
         let tag = Tag(tag::SKEL);
         if skel.len() < SKEL_HEADER_LEN {
-            return Err(SkfError::SectionLength { tag, len: skel.len() as u64, expected: SKEL_HEADER_LEN as u64 });
+            return Err(SkfError::SectionLength {
+                tag,
+                len: skel.len() as u64,
+                expected: SKEL_HEADER_LEN as u64,
+            });
         }
         let count = le_u32(skel, 0);
         let names_len = le_u32(skel, 4) as usize;
@@ -546,16 +592,27 @@ impl<'a> SkfView<'a> {
             return Err(SkfError::ReservedNonZero(8));
         }
         if count != config.joint_count {
-            return Err(SkfError::JointCount { skel: count, conf: config.joint_count });
+            return Err(SkfError::JointCount {
+                skel: count,
+                conf: config.joint_count,
+            });
         }
         // joint_count <= MAX_JOINTS and names_len <= MAX_NAMES_LEN keep this far from overflow.
         if names_len > MAX_NAMES_LEN {
-            return Err(SkfError::SectionLength { tag, len: skel.len() as u64, expected: MAX_NAMES_LEN as u64 });
+            return Err(SkfError::SectionLength {
+                tag,
+                len: skel.len() as u64,
+                expected: MAX_NAMES_LEN as u64,
+            });
         }
         let records_len = JOINT_RECORD_LEN * count as usize;
         let expected = SKEL_HEADER_LEN + records_len + names_len;
         if skel.len() != expected {
-            return Err(SkfError::SectionLength { tag, len: skel.len() as u64, expected: expected as u64 });
+            return Err(SkfError::SectionLength {
+                tag,
+                len: skel.len() as u64,
+                expected: expected as u64,
+            });
         }
         let base = Mat4::from_cols_array(&core::array::from_fn(|k| le_f32(skel, 16 + 4 * k)));
         if !base.is_finite() {
@@ -574,7 +631,9 @@ impl<'a> SkfView<'a> {
                 return Err(SkfError::BadParent(j as u32));
             }
             let (off, nlen) = (le_u32(r, 4) as usize, le_u32(r, 8) as usize);
-            let name = off.checked_add(nlen).and_then(|end| view.names.get(off..end));
+            let name = off
+                .checked_add(nlen)
+                .and_then(|end| view.names.get(off..end));
             match name.map(core::str::from_utf8) {
                 Some(Ok(s)) if !s.is_empty() => {}
                 _ => return Err(SkfError::BadJointName(j as u32)),
@@ -592,7 +651,11 @@ impl<'a> SkfView<'a> {
     fn parse_table(tinf: &'a [u8], data: &'a [u8]) -> Result<&'a [u8], SkfError> {
         let tag = Tag(tag::TINF);
         if tinf.len() < 8 {
-            return Err(SkfError::SectionLength { tag, len: tinf.len() as u64, expected: 8 });
+            return Err(SkfError::SectionLength {
+                tag,
+                len: tinf.len() as u64,
+                expected: 8,
+            });
         }
         let count = le_u32(tinf, 0);
         if le_u32(tinf, 4) != 0 {
@@ -603,7 +666,11 @@ impl<'a> SkfView<'a> {
         }
         let expected = 8 + TENSOR_ENTRY_LEN * count as usize;
         if tinf.len() != expected {
-            return Err(SkfError::SectionLength { tag, len: tinf.len() as u64, expected: expected as u64 });
+            return Err(SkfError::SectionLength {
+                tag,
+                len: tinf.len() as u64,
+                expected: expected as u64,
+            });
         }
         let table = &tinf[8..];
         let mut cursor = 0usize;
@@ -613,7 +680,10 @@ impl<'a> SkfView<'a> {
             if name.as_str().is_empty() || (0..i).any(|k| entry(table, k).name == name) {
                 return Err(SkfError::BadTensorName(i as u32));
             }
-            let dtype = Dtype::from_code(t.dtype).ok_or(SkfError::BadDtype { name, code: t.dtype })?;
+            let dtype = Dtype::from_code(t.dtype).ok_or(SkfError::BadDtype {
+                name,
+                code: t.dtype,
+            })?;
             let [d0, d1] = t.dims;
             let shape_ok = match t.rank {
                 1 => d0 > 0 && d1 == 0,
@@ -628,18 +698,27 @@ impl<'a> SkfView<'a> {
             if elems.checked_mul(dtype.size() as u64) != Some(t.nbytes) {
                 return Err(SkfError::ByteSize(name));
             }
-            let end = t.offset.checked_add(t.nbytes).filter(|&e| e <= data.len() as u64);
+            let end = t
+                .offset
+                .checked_add(t.nbytes)
+                .filter(|&e| e <= data.len() as u64);
             let Some(end) = end else {
                 return Err(SkfError::TensorPlacement(name));
             };
             let (offset, end) = (t.offset as usize, end as usize);
-            if offset % ALIGN != 0 || offset < cursor || check_padding(data, cursor, offset).is_err() {
+            if offset % ALIGN != 0
+                || offset < cursor
+                || check_padding(data, cursor, offset).is_err()
+            {
                 return Err(SkfError::TensorPlacement(name));
             }
             cursor = end;
         }
         if cursor != data.len() {
-            return Err(SkfError::Uncovered { offset: cursor as u64, len: (data.len() - cursor) as u64 });
+            return Err(SkfError::Uncovered {
+                offset: cursor as u64,
+                len: (data.len() - cursor) as u64,
+            });
         }
         Ok(table)
     }
@@ -647,12 +726,23 @@ impl<'a> SkfView<'a> {
     fn check_net(&self, net: Net) -> Result<(), SkfError> {
         let n = self.config.hidden_widths().len();
         for (i, (out, inp)) in self.config.layer_shapes(net).enumerate() {
-            let layer = if i < n { LayerName::Hidden(i) } else { LayerName::Out };
-            for (kind, expected) in [("weight", [out as u32, inp as u32]), ("bias", [out as u32, 0])] {
+            let layer = if i < n {
+                LayerName::Hidden(i)
+            } else {
+                LayerName::Out
+            };
+            for (kind, expected) in [
+                ("weight", [out as u32, inp as u32]),
+                ("bias", [out as u32, 0]),
+            ] {
                 let name = tensor_name(net, layer, kind);
                 let t = self.tensor_by(&name).ok_or(SkfError::MissingTensor(name))?;
                 if t.dims != expected {
-                    return Err(SkfError::TensorShape { name, got: t.dims, expected });
+                    return Err(SkfError::TensorShape {
+                        name,
+                        got: t.dims,
+                        expected,
+                    });
                 }
             }
         }
@@ -660,7 +750,9 @@ impl<'a> SkfView<'a> {
     }
 
     fn tensor_by(&self, name: &TensorName) -> Option<TensorView<'a>> {
-        (0..self.table.len() / TENSOR_ENTRY_LEN).map(|i| self.tensor_at(i)).find(|t| t.name == *name)
+        (0..self.table.len() / TENSOR_ENTRY_LEN)
+            .map(|i| self.tensor_at(i))
+            .find(|t| t.name == *name)
     }
 
     fn tensor_at(&self, i: usize) -> TensorView<'a> {
@@ -668,7 +760,13 @@ impl<'a> SkfView<'a> {
         // Validated at parse time.
         let dtype = Dtype::from_code(e.dtype).unwrap_or(Dtype::F16);
         let (start, end) = (e.offset as usize, (e.offset + e.nbytes) as usize);
-        TensorView { name: e.name, dtype, rank: e.rank, dims: e.dims, bytes: &self.data[start..end] }
+        TensorView {
+            name: e.name,
+            dtype,
+            rank: e.rank,
+            dims: e.dims,
+            bytes: &self.data[start..end],
+        }
     }
 
     /// Network configuration.
@@ -719,7 +817,10 @@ impl<'a> SkfView<'a> {
             core::cmp::Ordering::Equal => LayerName::Out,
             core::cmp::Ordering::Greater => return None,
         };
-        Some((self.tensor_by(&tensor_name(net, l, "weight"))?, self.tensor_by(&tensor_name(net, l, "bias"))?))
+        Some((
+            self.tensor_by(&tensor_name(net, l, "weight"))?,
+            self.tensor_by(&tensor_name(net, l, "bias"))?,
+        ))
     }
 }
 

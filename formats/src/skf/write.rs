@@ -48,11 +48,31 @@ pub enum SkfFileError {
 impl SkfModel {
     /// Adds the weight and bias of layer `layer` of `net` (`layer == hidden count` is the output
     /// layer); `weight` is row-major `[out, in]`.
-    pub fn push_layer(&mut self, net: Net, layer: usize, weight: Vec<f32>, out: usize, inp: usize, bias: Vec<f32>) {
+    pub fn push_layer(
+        &mut self,
+        net: Net,
+        layer: usize,
+        weight: Vec<f32>,
+        out: usize,
+        inp: usize,
+        bias: Vec<f32>,
+    ) {
         let n = self.config.hidden_widths().len();
-        let l = if layer < n { LayerName::Hidden(layer) } else { LayerName::Out };
-        self.tensors.push((tensor_name(net, l, "weight").as_str().to_string(), vec![out, inp], weight));
-        self.tensors.push((tensor_name(net, l, "bias").as_str().to_string(), vec![out], bias));
+        let l = if layer < n {
+            LayerName::Hidden(layer)
+        } else {
+            LayerName::Out
+        };
+        self.tensors.push((
+            tensor_name(net, l, "weight").as_str().to_string(),
+            vec![out, inp],
+            weight,
+        ));
+        self.tensors.push((
+            tensor_name(net, l, "bias").as_str().to_string(),
+            vec![out],
+            bias,
+        ));
     }
 
     /// Serialises the model (tensors as f16) and checks the result with [`SkfView::parse`].
@@ -78,8 +98,16 @@ impl SkfModel {
             r[8..12].copy_from_slice(&(name.len() as u32).to_le_bytes());
             names.extend_from_slice(name);
             let t = self.skeleton.bind_local()[j];
-            let floats = t.translation.to_array().into_iter().chain(t.rotation.to_array()).chain(t.scale.to_array());
-            for (k, f) in floats.chain(self.skeleton.inverse_bind()[j].to_cols_array()).enumerate() {
+            let floats = t
+                .translation
+                .to_array()
+                .into_iter()
+                .chain(t.rotation.to_array())
+                .chain(t.scale.to_array());
+            for (k, f) in floats
+                .chain(self.skeleton.inverse_bind()[j].to_cols_array())
+                .enumerate()
+            {
                 r[16 + 4 * k..20 + 4 * k].copy_from_slice(&f.to_le_bytes());
             }
             records.extend_from_slice(&r);
@@ -100,15 +128,25 @@ impl SkfModel {
         tinf.extend_from_slice(&[0; 4]);
         let mut data: Vec<u8> = Vec::new();
         for (name, dims, values) in &self.tensors {
-            let stored = TensorName::new(name).ok_or_else(|| invalid(format!("tensor name `{name}` is empty or over 24 bytes")))?;
+            let stored = TensorName::new(name).ok_or_else(|| {
+                invalid(format!("tensor name `{name}` is empty or over 24 bytes"))
+            })?;
             let elems: usize = dims.iter().product();
             if dims.is_empty() || dims.len() > 2 || elems != values.len() || elems == 0 {
-                return Err(invalid(format!("tensor `{name}` has dims {dims:?} but {} values", values.len())));
+                return Err(invalid(format!(
+                    "tensor `{name}` has dims {dims:?} but {} values",
+                    values.len()
+                )));
             }
             // f16 saturates to infinity above 65504: refuse rather than store a value the
             // runtime would read back as inf.
-            if let Some(i) = values.iter().position(|v| !(v.is_finite() && v.abs() <= f32::from(f16::MAX))) {
-                return Err(invalid(format!("tensor `{name}` has a value at {i} that is not finite in f16")));
+            if let Some(i) = values
+                .iter()
+                .position(|v| !(v.is_finite() && v.abs() <= f32::from(f16::MAX)))
+            {
+                return Err(invalid(format!(
+                    "tensor `{name}` has a value at {i} that is not finite in f16"
+                )));
             }
             let offset = align_up(data.len()).ok_or_else(|| invalid("DATA too large".into()))?;
             data.resize(offset, 0);
@@ -128,8 +166,12 @@ impl SkfModel {
         }
 
         let conf = self.config.to_bytes();
-        let sections: [(&[u8; 4], &[u8]); 4] =
-            [(&tag::CONF, &conf), (&tag::SKEL, &skel), (&tag::TINF, &tinf), (&tag::DATA, &data)];
+        let sections: [(&[u8; 4], &[u8]); 4] = [
+            (&tag::CONF, &conf),
+            (&tag::SKEL, &skel),
+            (&tag::TINF, &tinf),
+            (&tag::DATA, &data),
+        ];
         let mut out = vec![0u8; HEADER_LEN + SECTION_ENTRY_LEN * sections.len()];
         for (s, (t, body)) in sections.iter().enumerate() {
             let offset = align_up(out.len()).ok_or_else(|| invalid("file too large".into()))?;
@@ -148,22 +190,32 @@ impl SkfModel {
         out[16..24].copy_from_slice(&len.to_le_bytes());
         let sum = file_checksum(&out);
         out[24..32].copy_from_slice(&sum.to_le_bytes());
-        SkfView::parse(&out).map_err(|e| invalid(format!("written file does not validate: {e}")))?;
+        SkfView::parse(&out)
+            .map_err(|e| invalid(format!("written file does not validate: {e}")))?;
         Ok(out)
     }
 
     /// Writes the model to `path` atomically.
     pub fn write(&self, path: &Path) -> Result<(), SkfFileError> {
         let bytes = self.to_bytes()?;
-        write_atomic(path, &bytes).map_err(|source| SkfFileError::Io { path: path.to_owned(), source })
+        write_atomic(path, &bytes).map_err(|source| SkfFileError::Io {
+            path: path.to_owned(),
+            source,
+        })
     }
 }
 
 /// Reads a whole `.skf` file and validates it, returning its bytes (parse them again with
 /// [`SkfView::parse`] to borrow; validation is cheap next to any use of the model).
 pub fn read_skf_file(path: &Path) -> Result<Vec<u8>, SkfFileError> {
-    let bytes = std::fs::read(path).map_err(|source| SkfFileError::Io { path: path.to_owned(), source })?;
-    SkfView::parse(&bytes).map_err(|source| SkfFileError::Format { path: path.to_owned(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| SkfFileError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    SkfView::parse(&bytes).map_err(|source| SkfFileError::Format {
+        path: path.to_owned(),
+        source,
+    })?;
     Ok(bytes)
 }
 
@@ -174,7 +226,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
         _ => PathBuf::from("."),
     };
-    let file_name = path.file_name().ok_or_else(|| std::io::Error::other("path has no file name"))?;
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| std::io::Error::other("path has no file name"))?;
     let mut tmp_name = std::ffi::OsString::from(".");
     tmp_name.push(file_name);
     tmp_name.push(format!(".{}.tmp", std::process::id()));
@@ -200,14 +254,24 @@ mod tests {
 
     #[test]
     fn refuses_values_that_overflow_f16() {
-        let skeleton =
-            Skeleton::new(vec!["root".into()], vec![None], vec![Transform::IDENTITY], None, None, Mat4::IDENTITY)
-                .unwrap();
+        let skeleton = Skeleton::new(
+            vec!["root".into()],
+            vec![None],
+            vec![Transform::IDENTITY],
+            None,
+            None,
+            Mat4::IDENTITY,
+        )
+        .unwrap();
         let mut config = ModelConfig::vinecs(1, [-1.0; 3], [1.0; 3]);
         config.hidden_count = 1;
         config.hidden = [4, 0, 0, 0, 0, 0, 0, 0];
         config.skip_layer = 0;
-        let mut model = SkfModel { config, skeleton, tensors: Vec::new() };
+        let mut model = SkfModel {
+            config,
+            skeleton,
+            tensors: Vec::new(),
+        };
         for (i, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
             model.push_layer(Net::Skin, i, vec![0.5; out * inp], out, inp, vec![0.0; out]);
         }

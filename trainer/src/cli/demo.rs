@@ -54,7 +54,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut timings = Vec::new();
 
     let t = Instant::now();
-    let summary = synthesize(&capture_dir, &SynthConfig { seed: args.seed, ..SynthConfig::default() })?;
+    let summary = synthesize(
+        &capture_dir,
+        &SynthConfig {
+            seed: args.seed,
+            ..SynthConfig::default()
+        },
+    )?;
     timings.push(("synthesise the capture", t.elapsed().as_secs_f64()));
     println!(
         "capture: {} vertices, {} joints, {} train / {} test frames → {}",
@@ -77,18 +83,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         warm_start_iterations: args.warm_start,
         ..TrainConfig::default()
     };
-    let options = DataOptions { train_vertices: args.train_vertices, ..DataOptions::default() };
+    let options = DataOptions {
+        train_vertices: args.train_vertices,
+        ..DataOptions::default()
+    };
     let t = Instant::now();
     let skin_work = out.join("train-skinnet");
-    let loop_s = train_skinnet(&capture, &initial, config.clone(), &options, &skin_work, &model, false, !args.quiet)?;
-    timings.push(("train SkinNet (data + loop + export)", t.elapsed().as_secs_f64()));
+    let loop_s = train_skinnet(
+        &capture,
+        &initial,
+        config.clone(),
+        &options,
+        &skin_work,
+        &model,
+        false,
+        !args.quiet,
+    )?;
+    timings.push((
+        "train SkinNet (data + loop + export)",
+        t.elapsed().as_secs_f64(),
+    ));
     let per_iteration = loop_s / (args.iterations + args.warm_start).max(1) as f64;
 
     let static_file = out.join("static_weights.json");
     let static_work = out.join("train-static");
     let t = Instant::now();
-    let static_config = TrainConfig { iterations: args.static_iterations, ..config };
-    train_static(&capture, &initial, static_config, &static_work, &static_file, false, !args.quiet)?;
+    let static_config = TrainConfig {
+        iterations: args.static_iterations,
+        ..config
+    };
+    train_static(
+        &capture,
+        &initial,
+        static_config,
+        &static_work,
+        &static_file,
+        false,
+        !args.quiet,
+    )?;
     timings.push(("train the static baseline", t.elapsed().as_secs_f64()));
 
     let t = Instant::now();
@@ -102,27 +134,54 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let options = EvalOptions::default();
     let rows: Vec<EvalRow> = methods
         .iter()
-        .map(|m| evaluate(&capture, m, &options).with_context(|| format!("evaluating `{}`", m.method_name())))
+        .map(|m| {
+            evaluate(&capture, m, &options)
+                .with_context(|| format!("evaluating `{}`", m.method_name()))
+        })
         .collect::<anyhow::Result<_>>()?;
     timings.push(("evaluate", t.elapsed().as_secs_f64()));
 
     let table = rows_to_table(&rows);
     println!("\n{table}");
     let json_path = out.join("results.json");
-    write_atomic(&json_path, rows_to_json(&rows).as_bytes()).with_context(|| json_path.display().to_string())?;
+    write_atomic(&json_path, rows_to_json(&rows).as_bytes())
+        .with_context(|| json_path.display().to_string())?;
 
     // Plots and pictures.
-    for (work, name) in [(&skin_work, "losses_skinnet.png"), (&static_work, "losses_static.png")] {
+    for (work, name) in [
+        (&skin_work, "losses_skinnet.png"),
+        (&static_work, "losses_static.png"),
+    ] {
         let csv_path = work.join("losses.csv");
-        let csv = std::fs::read_to_string(&csv_path).with_context(|| csv_path.display().to_string())?;
+        let csv =
+            std::fs::read_to_string(&csv_path).with_context(|| csv_path.display().to_string())?;
         plot_losses(&csv, &out.join(name))?;
     }
-    let frame = *capture.test_frames.last().context("the capture has no test frames")?;
+    let frame = *capture
+        .test_frames
+        .last()
+        .context("the capture has no test frames")?;
     for (weights, kind, name) in [
-        (Skinning::Skf(model.clone()), super::render::Kind::Overlay, "overlay_ours.png"),
-        (Skinning::Skf(model.clone()), super::render::Kind::Error, "error_ours.png"),
-        (Skinning::Initial, super::render::Kind::Error, "error_initial.png"),
-        (Skinning::Static(static_file.clone()), super::render::Kind::Error, "error_static.png"),
+        (
+            Skinning::Skf(model.clone()),
+            super::render::Kind::Overlay,
+            "overlay_ours.png",
+        ),
+        (
+            Skinning::Skf(model.clone()),
+            super::render::Kind::Error,
+            "error_ours.png",
+        ),
+        (
+            Skinning::Initial,
+            super::render::Kind::Error,
+            "error_initial.png",
+        ),
+        (
+            Skinning::Static(static_file.clone()),
+            super::render::Kind::Error,
+            "error_static.png",
+        ),
     ] {
         super::render::run(super::render::Args {
             capture: capture_dir.clone(),
@@ -137,19 +196,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let mut md = String::new();
     let _ = writeln!(md, "# Skinfield demo results\n");
-    let _ = writeln!(md, "Built-in capture (seed {}), {} test frames, {} surface samples per frame.\n", args.seed, capture.test_frames.len(), options.samples);
+    let _ = writeln!(
+        md,
+        "Built-in capture (seed {}), {} test frames, {} surface samples per frame.\n",
+        args.seed,
+        capture.test_frames.len(),
+        options.samples
+    );
     let _ = writeln!(md, "```\n{table}```\n");
     let _ = writeln!(md, "| step | seconds |\n| --- | --- |");
     for (step, s) in &timings {
         let _ = writeln!(md, "| {step} | {s:.1} |");
     }
-    let _ = writeln!(md, "\nSkinNet: {} warm-start + {} image iterations at {} training vertices, {:.3} s per iteration on average.", args.warm_start, args.iterations, args.train_vertices, per_iteration);
+    let _ = writeln!(
+        md,
+        "\nSkinNet: {} warm-start + {} image iterations at {} training vertices, {:.3} s per iteration on average.",
+        args.warm_start, args.iterations, args.train_vertices, per_iteration
+    );
     let _ = writeln!(md, "Total: {:.1} s.", total.elapsed().as_secs_f64());
     let md_path = out.join("results.md");
     write_atomic(&md_path, md.as_bytes()).with_context(|| md_path.display().to_string())?;
     for (step, s) in &timings {
         println!("{step:40} {s:8.1} s");
     }
-    println!("SkinNet: {per_iteration:.3} s per iteration; total {:.1} s; results in {}", total.elapsed().as_secs_f64(), out.display());
+    println!(
+        "SkinNet: {per_iteration:.3} s per iteration; total {:.1} s; results in {}",
+        total.elapsed().as_secs_f64(),
+        out.display()
+    );
     Ok(())
 }

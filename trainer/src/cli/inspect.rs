@@ -167,7 +167,9 @@ fn inspect_bvh(path: &Path) -> anyhow::Result<Report> {
     extra.insert("end_sites".into(), motion.end_sites.len().into());
     extra.insert("channels".into(), motion.channel_count().into());
     extra.insert("frame_time_s".into(), motion.frame_time.into());
-    let name = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let name = path
+        .file_stem()
+        .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
     Ok(Report {
         kind: "bvh",
         vertices: 0,

@@ -43,27 +43,58 @@ pub struct Args {
 
 /// Runs `trainer train`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let capture = load_capture(&args.capture).with_context(|| format!("loading the capture {}", args.capture.display()))?;
+    let capture = load_capture(&args.capture)
+        .with_context(|| format!("loading the capture {}", args.capture.display()))?;
     let config = match &args.config {
         Some(path) => TrainConfig::load(path)?,
         None => TrainConfig::default(),
     };
-    let work = args.work.clone().unwrap_or_else(|| default_work_dir(&args.out));
+    let work = args
+        .work
+        .clone()
+        .unwrap_or_else(|| default_work_dir(&args.out));
     let initial = initial_weights(&capture)?;
-    let options = DataOptions { train_vertices: args.train_vertices, ..DataOptions::default() };
-    let seconds = if args.static_weights {
-        train_static(&capture, &initial, config, &work, &args.out, args.resume, !args.quiet)?
-    } else {
-        train_skinnet(&capture, &initial, config, &options, &work, &args.out, args.resume, !args.quiet)?
+    let options = DataOptions {
+        train_vertices: args.train_vertices,
+        ..DataOptions::default()
     };
-    println!("wrote {} ({seconds:.1} s of training; losses in {})", args.out.display(), work.join("losses.csv").display());
+    let seconds = if args.static_weights {
+        train_static(
+            &capture,
+            &initial,
+            config,
+            &work,
+            &args.out,
+            args.resume,
+            !args.quiet,
+        )?
+    } else {
+        train_skinnet(
+            &capture,
+            &initial,
+            config,
+            &options,
+            &work,
+            &args.out,
+            args.resume,
+            !args.quiet,
+        )?
+    };
+    println!(
+        "wrote {} ({seconds:.1} s of training; losses in {})",
+        args.out.display(),
+        work.join("losses.csv").display()
+    );
     Ok(())
 }
 
 /// `OUT` → `OUT.work/` beside it.
 #[must_use]
 pub fn default_work_dir(out: &Path) -> PathBuf {
-    let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    let mut name = out
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
     name.push(".work");
     out.with_file_name(name)
 }
@@ -108,7 +139,11 @@ pub fn train_static(
 ) -> anyhow::Result<f64> {
     // The logits start at the initial weights: regressing them first would be a no-op.
     config.warm_start_iterations = 0;
-    let options = DataOptions { train_vertices: 0, ..DataOptions::default() };
+    config.adam.lr = skinfield_trainer::train::STATIC_LR;
+    let options = DataOptions {
+        train_vertices: 0,
+        ..DataOptions::default()
+    };
     let data = train_data(capture, initial, &options)?;
     let skeleton = data.skeleton.clone();
     let joints = skeleton.len();
@@ -119,7 +154,9 @@ pub fn train_static(
     let start = Instant::now();
     trainer.run(work, progress)?;
     let seconds = start.elapsed().as_secs_f64();
-    let dense = trainer.static_weights()?.context("the trainer holds no static weights")?;
+    let dense = trainer
+        .static_weights()?
+        .context("the trainer holds no static weights")?;
     let skin = StaticSkin::from_dense(&dense, joints)?;
     write_static_weights(out, &skeleton, &skin)?;
     Ok(seconds)

@@ -28,7 +28,10 @@ pub struct DataOptions {
 
 impl Default for DataOptions {
     fn default() -> Self {
-        Self { train_vertices: 2500, cameras: 0 }
+        Self {
+            train_vertices: 2500,
+            cameras: 0,
+        }
     }
 }
 
@@ -51,7 +54,12 @@ pub enum DataError {
 pub fn initial_weights(capture: &Capture) -> Result<StaticSkin, DataError> {
     match &capture.initial_weights {
         Some(skin) => Ok(skin.clone()),
-        None => Ok(crate::heat::bone_heat(&capture.template, &capture.skeleton, &crate::heat::HeatOptions::default())?.skin),
+        None => Ok(crate::heat::bone_heat(
+            &capture.template,
+            &capture.skeleton,
+            &crate::heat::HeatOptions::default(),
+        )?
+        .skin),
     }
 }
 
@@ -64,14 +72,26 @@ pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u
         return (template.clone(), (0..n as u32).collect());
     }
     let indices: Vec<u32> = template.triangles.iter().flatten().copied().collect();
-    let bytes: Vec<u8> = template.positions.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect();
+    let bytes: Vec<u8> = template
+        .positions
+        .iter()
+        .flat_map(|p| p.to_array())
+        .flat_map(f32::to_le_bytes)
+        .collect();
     // 12-byte stride with the position at offset 0 always fits the adapter.
     let Ok(adapter) = meshopt::VertexDataAdapter::new(&bytes, 12, 0) else {
         return (template.clone(), (0..n as u32).collect());
     };
     // A closed surface has about twice as many triangles as vertices.
     let target_indices = (target * 6).min(indices.len());
-    let simplified = meshopt::simplify(&indices, &adapter, target_indices, 0.05, meshopt::SimplifyOptions::None, None);
+    let simplified = meshopt::simplify(
+        &indices,
+        &adapter,
+        target_indices,
+        0.05,
+        meshopt::SimplifyOptions::None,
+        None,
+    );
     let mut remap = vec![u32::MAX; n];
     let mut source = Vec::new();
     let mut triangles = Vec::new();
@@ -87,21 +107,29 @@ pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u
             remap[i as usize]
         }));
     }
-    let pick = |v: &Vec<_>| source.iter().map(|&i| v[i as usize]).collect::<Vec<_>>();
-    let positions = pick(&template.positions);
+    let positions = pick(&template.positions, &source);
     let reduced = Template {
         normals: area_weighted_normals(&positions, &triangles),
         positions,
         triangles,
-        uvs: template.uvs.as_ref().map(pick),
-        colors: template.colors.as_ref().map(pick),
-        part_labels: template.part_labels.as_ref().map(pick),
+        uvs: template.uvs.as_ref().map(|a| pick(a, &source)),
+        colors: template.colors.as_ref().map(|a| pick(a, &source)),
+        part_labels: template.part_labels.as_ref().map(|a| pick(a, &source)),
     };
     (reduced, source)
 }
 
+/// The entries of `values` at `indices`.
+fn pick<T: Copy>(values: &[T], indices: &[u32]) -> Vec<T> {
+    indices.iter().map(|&i| values[i as usize]).collect()
+}
+
 /// Builds the stage-1 training data from `capture`'s training frames.
-pub fn train_data(capture: &Capture, initial: &StaticSkin, options: &DataOptions) -> Result<TrainData, DataError> {
+pub fn train_data(
+    capture: &Capture,
+    initial: &StaticSkin,
+    options: &DataOptions,
+) -> Result<TrainData, DataError> {
     let skeleton = capture.skeleton.clone();
     let j = skeleton.len();
     if initial.vertex_count() != capture.template.vertex_count() || initial.joint_count() != j {
@@ -114,7 +142,10 @@ pub fn train_data(capture: &Capture, initial: &StaticSkin, options: &DataOptions
     }
     let (template, source) = simplify_template(&capture.template, options.train_vertices);
     let dense = initial.to_dense();
-    let init_weights = source.iter().flat_map(|&v| dense[v as usize * j..(v as usize + 1) * j].iter().copied()).collect();
+    let init_weights = source
+        .iter()
+        .flat_map(|&v| dense[v as usize * j..(v as usize + 1) * j].iter().copied())
+        .collect();
     let cameras = match options.cameras {
         0 => capture.rig.cameras.len(),
         c => c.min(capture.rig.cameras.len()),
@@ -132,14 +163,31 @@ pub fn train_data(capture: &Capture, initial: &StaticSkin, options: &DataOptions
         let mut views = Vec::with_capacity(cameras);
         for (c, camera) in capture.rig.cameras.iter().take(cameras).enumerate() {
             let mask = capture.load_mask(c, f)?;
-            let target = SilhouetteTarget::from_mask(mask.width as usize, mask.height as usize, &mask.inside).map_err(|e| {
+            let target = SilhouetteTarget::from_mask(
+                mask.width as usize,
+                mask.height as usize,
+                &mask.inside,
+            )
+            .map_err(|e| {
                 DataError::Inconsistent(format!("{}: {e}", capture.mask_path(c, f).display()))
             })?;
-            views.push(View { camera: camera.clone(), target });
+            views.push(View {
+                camera: camera.clone(),
+                target,
+            });
         }
-        frames.push(Frame { skinning, pose_features: features, views });
+        frames.push(Frame {
+            skinning,
+            pose_features: features,
+            views,
+        });
     }
-    Ok(TrainData { skeleton, template, init_weights, frames })
+    Ok(TrainData {
+        skeleton,
+        template,
+        init_weights,
+        frames,
+    })
 }
 
 #[cfg(test)]
@@ -153,11 +201,19 @@ mod tests {
         let t = &character.template;
         let (r, source) = simplify_template(t, t.vertex_count() / 3);
         r.validate().unwrap();
-        assert!(r.vertex_count() < t.vertex_count() / 2, "{} of {}", r.vertex_count(), t.vertex_count());
+        assert!(
+            r.vertex_count() < t.vertex_count() / 2,
+            "{} of {}",
+            r.vertex_count(),
+            t.vertex_count()
+        );
         assert_eq!(source.len(), r.vertex_count());
         for (k, &s) in source.iter().enumerate() {
             assert_eq!(r.positions[k], t.positions[s as usize]);
-            assert_eq!(r.part_labels.as_ref().unwrap()[k], t.part_labels.as_ref().unwrap()[s as usize]);
+            assert_eq!(
+                r.part_labels.as_ref().unwrap()[k],
+                t.part_labels.as_ref().unwrap()[s as usize]
+            );
         }
         let (same, identity) = simplify_template(t, 0);
         assert_eq!(same, *t);
