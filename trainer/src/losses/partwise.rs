@@ -34,10 +34,10 @@ impl PartwiseReg {
             );
         }
         let v = init.len() / joints;
-        if let Some(l) = labels {
-            if l.len() != v {
-                candle_core::bail!("part-wise regulariser: {} labels for {v} vertices", l.len());
-            }
+        if let Some(l) = labels
+            && l.len() != v
+        {
+            candle_core::bail!("part-wise regulariser: {} labels for {v} vertices", l.len());
         }
         let mask: Vec<f32> = init
             .chunks(joints)

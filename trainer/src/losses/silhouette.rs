@@ -303,10 +303,10 @@ impl Grid {
                 }
             }
             // Every cell of ring r + 1 is at least r cells away from q in x or y.
-            if let Some((bd, _)) = best {
-                if bd.sqrt() <= r as f32 * self.cell {
-                    break;
-                }
+            if let Some((bd, _)) = best
+                && bd.sqrt() <= r as f32 * self.cell
+            {
+                break;
             }
         }
         best.map(|b| b.1)

@@ -516,20 +516,20 @@ impl Trainer {
         let csv_path = dir.join("losses.csv");
         // Keep the rows up to the checkpoint (a crash may have logged iterations after it).
         let mut kept = vec![LossRecord::CSV_HEADER.to_string()];
-        if self.done > 0 {
-            if let Ok(text) = std::fs::read_to_string(&csv_path) {
-                kept.extend(
-                    text.lines()
-                        .skip(1)
-                        .filter(|l| {
-                            l.split(',')
-                                .next()
-                                .and_then(|i| i.parse::<u64>().ok())
-                                .is_some_and(|i| i <= self.done)
-                        })
-                        .map(str::to_string),
-                );
-            }
+        if self.done > 0
+            && let Ok(text) = std::fs::read_to_string(&csv_path)
+        {
+            kept.extend(
+                text.lines()
+                    .skip(1)
+                    .filter(|l| {
+                        l.split(',')
+                            .next()
+                            .and_then(|i| i.parse::<u64>().ok())
+                            .is_some_and(|i| i <= self.done)
+                    })
+                    .map(str::to_string),
+            );
         }
         let mut csv = std::fs::File::create(&csv_path).map_err(io(&csv_path))?;
         writeln!(csv, "{}", kept.join("\n")).map_err(io(&csv_path))?;
