@@ -164,3 +164,52 @@ fn skf_model() {
     assert_eq!(json["joints"], 3);
     assert_eq!(json["tensors"], 12);
 }
+
+#[test]
+fn every_shared_bvh_clip() {
+    let Some(dir) = shared_data_dir() else { return };
+    // file, joints without End Sites, frames, duration (SOURCE.md)
+    let cases = [
+        ("131_01.bvh", 31, 994, 8.28),
+        ("131_03.bvh", 31, 1102, 9.18),
+        ("02_01.bvh", 31, 343, 2.86),
+        ("pirouette.bvh", 43, 592, 4.93),
+        ("jumping_jacks.bvh", 31, 125, 4.17),
+    ];
+    for (file, joints, frames, duration) in cases {
+        let (code, json, stderr) = inspect(&dir.join("mocap-cmu").join(file));
+        assert_eq!(code, 0, "{file}: {stderr}");
+        assert_eq!(json["kind"], "bvh", "{file}");
+        assert_eq!(json["joints"], joints, "{file}");
+        assert_eq!(json["clips"][0]["frames"], frames, "{file}");
+        let d = json["clips"][0]["duration_s"].as_f64().unwrap();
+        assert!((d - duration).abs() < 0.01, "{file}: {d}");
+    }
+}
+
+#[test]
+fn capture_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let summary = skinfield_trainer::synth::synthesize(
+        dir.path(),
+        &skinfield_trainer::synth::SynthConfig::tiny(),
+    )
+    .unwrap();
+    let (code, json, stderr) = inspect(dir.path());
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(json["kind"], "capture");
+    assert_eq!(json["vertices"], summary.vertices);
+    assert_eq!(json["triangles"], summary.triangles);
+    assert_eq!(json["joints"], summary.joints);
+    assert_eq!(json["train_frames"], summary.train_frames);
+    assert_eq!(json["test_frames"], summary.test_frames);
+    // A folder without a manifest is bad input naming the folder.
+    let empty = tempfile::tempdir().unwrap();
+    let (code, _, stderr) = inspect(empty.path());
+    assert_eq!(code, 1);
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.contains(&empty.path().display().to_string()) || stderr.contains("manifest"),
+        "{stderr}"
+    );
+}

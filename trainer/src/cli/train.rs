@@ -139,7 +139,6 @@ pub fn train_static(
 ) -> anyhow::Result<f64> {
     // The logits start at the initial weights: regressing them first would be a no-op.
     config.warm_start_iterations = 0;
-    config.adam.lr = skinfield_trainer::train::STATIC_LR;
     let options = DataOptions {
         train_vertices: 0,
         ..DataOptions::default()

@@ -42,13 +42,6 @@ use crate::optim::Adam;
 use crate::skinnet::{PREFIX, SkinNet, encode_positions, softmax_last};
 pub use config::{ConfigError, LossWeights, TrainConfig};
 
-/// Added to the initial weights before taking the static baseline's initial logits.
-pub const STATIC_EPSILON: f32 = 1e-4;
-
-/// Learning rate of the static baseline: its parameters are per-vertex logits, not network
-/// weights, and need steps of this size to move within a few hundred iterations.
-pub const STATIC_LR: f64 = 1e-2;
-
 /// One camera view of a training frame.
 #[derive(Clone, Debug)]
 pub struct View {
@@ -222,16 +215,11 @@ impl Trainer {
         let mc = ModelConfig::vinecs(j as u32, (lo - pad).to_array(), (hi + pad).to_array());
         let varmap = VarMap::new();
         let model = if static_weights {
-            // The logits start at ln(w_init + ε) with ε = STATIC_EPSILON, so the baseline starts
-            // (within 0.24 % of the weight mass for 24 joints) from the initial weights it is
-            // compared with; ε = 0.01 leaked 19 % of every vertex's weight to all joints and
-            // tripled the Chamfer error before any training. Small ε makes zero weights slow to
-            // grow at lr 1e-3, which is why the static baseline trains at STATIC_LR.
-            let logits: Vec<f32> = data
-                .init_weights
-                .iter()
-                .map(|w| (w + STATIC_EPSILON).ln())
-                .collect();
+            // ε = 0.01 keeps zero weights within ~5 logit units: with ε = 1e-4 (−9.2) Adam's
+            // lr-sized steps needed hundreds of iterations before a zero weight could grow. The
+            // price: the baseline starts with ε/(1 + Jε) of every vertex's weight spread over all
+            // joints (19 % for J = 24), i.e. not exactly at the initial weights.
+            let logits: Vec<f32> = data.init_weights.iter().map(|w| (w + 1e-2).ln()).collect();
             let var = Var::from_tensor(&Tensor::from_vec(logits, (v, j), &dev)?)?;
             varmap
                 .data()
