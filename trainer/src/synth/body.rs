@@ -292,43 +292,12 @@ fn simplify(
     triangles: &[[u32; 3]],
     target_vertices: usize,
 ) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let indices: Vec<u32> = triangles.iter().flatten().copied().collect();
-    let bytes: Vec<u8> = positions
-        .iter()
-        .flat_map(|p| p.to_array())
-        .flat_map(f32::to_le_bytes)
-        .collect();
-    // 12-byte stride, position at offset 0: cannot fail for this layout.
-    let Ok(adapter) = meshopt::VertexDataAdapter::new(&bytes, 12, 0) else {
-        return (positions.to_vec(), triangles.to_vec());
-    };
-    // A closed mesh has about twice as many triangles as vertices.
-    let target_indices = (target_vertices * 2 * 3).min(indices.len());
-    let simplified = meshopt::simplify(
-        &indices,
-        &adapter,
-        target_indices,
-        0.05,
-        meshopt::SimplifyOptions::None,
-        None,
-    );
-    let mut remap = vec![u32::MAX; positions.len()];
-    let mut out_p = Vec::new();
-    let mut out_t = Vec::new();
-    for t in simplified.chunks_exact(3) {
-        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
-            continue;
-        }
-        let tri = [t[0], t[1], t[2]].map(|i| {
-            if remap[i as usize] == u32::MAX {
-                remap[i as usize] = out_p.len() as u32;
-                out_p.push(positions[i as usize]);
-            }
-            remap[i as usize]
-        });
-        out_t.push(tri);
-    }
-    (out_p, out_t)
+    let (source, triangles) =
+        crate::simplify::simplify_subset(positions, triangles, target_vertices);
+    (
+        source.iter().map(|&i| positions[i as usize]).collect(),
+        triangles,
+    )
 }
 
 #[cfg(test)]

@@ -71,42 +71,8 @@ pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u
     if target == 0 || target >= n {
         return (template.clone(), (0..n as u32).collect());
     }
-    let indices: Vec<u32> = template.triangles.iter().flatten().copied().collect();
-    let bytes: Vec<u8> = template
-        .positions
-        .iter()
-        .flat_map(|p| p.to_array())
-        .flat_map(f32::to_le_bytes)
-        .collect();
-    // 12-byte stride with the position at offset 0 always fits the adapter.
-    let Ok(adapter) = meshopt::VertexDataAdapter::new(&bytes, 12, 0) else {
-        return (template.clone(), (0..n as u32).collect());
-    };
-    // A closed surface has about twice as many triangles as vertices.
-    let target_indices = (target * 6).min(indices.len());
-    let simplified = meshopt::simplify(
-        &indices,
-        &adapter,
-        target_indices,
-        0.05,
-        meshopt::SimplifyOptions::None,
-        None,
-    );
-    let mut remap = vec![u32::MAX; n];
-    let mut source = Vec::new();
-    let mut triangles = Vec::new();
-    for t in simplified.chunks_exact(3) {
-        if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
-            continue;
-        }
-        triangles.push([t[0], t[1], t[2]].map(|i| {
-            if remap[i as usize] == u32::MAX {
-                remap[i as usize] = source.len() as u32;
-                source.push(i);
-            }
-            remap[i as usize]
-        }));
-    }
+    let (source, triangles) =
+        crate::simplify::simplify_subset(&template.positions, &template.triangles, target);
     let positions = pick(&template.positions, &source);
     let reduced = Template {
         normals: area_weighted_normals(&positions, &triangles),
