@@ -1,161 +1,19 @@
 //! `trainer pose` on CesiumMan's walk against an independent glTF skinning reference written
-//! here straight on the gltf crate (its own buffer loading, node TRS sampled and slerped in f64,
-//! joint world × inverse bind, the file's JOINTS_0/WEIGHTS_0), plus the `--model` and `--dqs`
-//! paths and bad input.
+//! straight on the gltf crate (`formats/tests/gltf_reference`: its own buffer loading, node TRS
+//! sampled in f64, joint world × inverse bind, every JOINTS_n/WEIGHTS_n set), plus the
+//! `--model` and `--dqs` paths and bad input.
 
 use std::path::Path;
 use std::process::Command;
 
-use glam::{DMat4, DQuat, DVec3, Mat4, Vec3};
+use glam::{DMat4, DVec3, Mat4};
 use skinfield_formats::shared_data::shared_data_dir;
 
-type Trs = (DVec3, DQuat, DVec3);
-
-struct Reference {
-    doc: gltf::Document,
-    buffers: Vec<gltf::buffer::Data>,
-}
-
-impl Reference {
-    fn open(path: &Path) -> Self {
-        let g = gltf::Gltf::open(path).unwrap();
-        let buffers = gltf::import_buffers(&g.document, path.parent(), g.blob.clone()).unwrap();
-        Self {
-            doc: g.document,
-            buffers,
-        }
-    }
-
-    /// Node locals at time `t` of animation `anim` (linear/step keys, held outside the range).
-    fn locals(&self, anim: usize, t: f64) -> Vec<Trs> {
-        let mut out: Vec<Trs> = self
-            .doc
-            .nodes()
-            .map(|n| {
-                let (tr, r, s) = n.transform().decomposed();
-                (
-                    Vec3::from(tr).as_dvec3(),
-                    DQuat::from_array(r.map(f64::from)),
-                    Vec3::from(s).as_dvec3(),
-                )
-            })
-            .collect();
-        let data = |b: gltf::Buffer<'_>| Some(&self.buffers[b.index()].0[..]);
-        let a = self.doc.animations().nth(anim).unwrap();
-        for ch in a.channels() {
-            use gltf::animation::util::ReadOutputs as O;
-            let r = ch.reader(data);
-            let times: Vec<f64> = r.read_inputs().unwrap().map(f64::from).collect();
-            let vals: Vec<[f64; 4]> = match r.read_outputs().unwrap() {
-                O::Translations(i) | O::Scales(i) => i
-                    .map(|v| [v[0].into(), v[1].into(), v[2].into(), 0.0])
-                    .collect(),
-                O::Rotations(i) => i
-                    .into_f32()
-                    .map(|v| [v[0].into(), v[1].into(), v[2].into(), v[3].into()])
-                    .collect(),
-                O::MorphTargetWeights(_) => continue,
-            };
-            let n = times.len();
-            let v = if t <= times[0] {
-                vals[0]
-            } else if t >= times[n - 1] {
-                vals[n - 1]
-            } else {
-                let k = times.iter().rposition(|&x| x <= t).unwrap();
-                let u = (t - times[k]) / (times[k + 1] - times[k]);
-                let (a, b) = (vals[k], vals[k + 1]);
-                match (ch.sampler().interpolation(), ch.target().property()) {
-                    (gltf::animation::Interpolation::Step, _) => a,
-                    (_, gltf::animation::Property::Rotation) => {
-                        let (qa, qb) = (DQuat::from_array(a), DQuat::from_array(b));
-                        qa.slerp(qb, u).to_array()
-                    }
-                    _ => [0, 1, 2, 3].map(|i| a[i] + (b[i] - a[i]) * u),
-                }
-            };
-            let node = &mut out[ch.target().node().index()];
-            match ch.target().property() {
-                gltf::animation::Property::Translation => node.0 = DVec3::new(v[0], v[1], v[2]),
-                gltf::animation::Property::Rotation => node.1 = DQuat::from_array(v).normalize(),
-                gltf::animation::Property::Scale => node.2 = DVec3::new(v[0], v[1], v[2]),
-                gltf::animation::Property::MorphTargetWeights => {}
-            }
-        }
-        out
-    }
-
-    fn worlds(&self, locals: &[Trs]) -> Vec<DMat4> {
-        let mut parent = vec![None; locals.len()];
-        for n in self.doc.nodes() {
-            for c in n.children() {
-                parent[c.index()] = Some(n.index());
-            }
-        }
-        (0..locals.len())
-            .map(|i| {
-                let l = |k: usize| {
-                    DMat4::from_scale_rotation_translation(locals[k].2, locals[k].1, locals[k].0)
-                };
-                let mut m = l(i);
-                let mut at = parent[i];
-                while let Some(p) = at {
-                    m = l(p) * m;
-                    at = parent[p];
-                }
-                m
-            })
-            .collect()
-    }
-
-    /// Skinned positions of every skinned primitive, mesh by mesh, primitive by primitive.
-    fn skinned(&self, worlds: &[DMat4]) -> Vec<DVec3> {
-        let data = |b: gltf::Buffer<'_>| Some(&self.buffers[b.index()].0[..]);
-        let mut out = Vec::new();
-        for mesh in self.doc.meshes() {
-            let Some(node) = self
-                .doc
-                .nodes()
-                .find(|n| n.mesh().map(|m| m.index()) == Some(mesh.index()) && n.skin().is_some())
-            else {
-                continue;
-            };
-            let skin = node.skin().unwrap();
-            let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
-            let ibm: Vec<DMat4> = skin
-                .reader(data)
-                .read_inverse_bind_matrices()
-                .unwrap()
-                .map(|m| Mat4::from_cols_array_2d(&m).as_dmat4())
-                .collect();
-            let mats: Vec<DMat4> = joints
-                .iter()
-                .zip(&ibm)
-                .map(|(&j, b)| worlds[j] * *b)
-                .collect();
-            for p in mesh.primitives() {
-                let r = p.reader(data);
-                let pos: Vec<DVec3> = r
-                    .read_positions()
-                    .unwrap()
-                    .map(|p| Vec3::from(p).as_dvec3())
-                    .collect();
-                let js: Vec<[u16; 4]> = r.read_joints(0).unwrap().into_u16().collect();
-                let ws: Vec<[f32; 4]> = r.read_weights(0).unwrap().into_f32().collect();
-                for v in 0..pos.len() {
-                    let (mut acc, mut sum) = (DVec3::ZERO, 0.0);
-                    for k in 0..4 {
-                        let w = f64::from(ws[v][k]);
-                        acc += w * mats[usize::from(js[v][k])].transform_point3(pos[v]);
-                        sum += w;
-                    }
-                    out.push(acc / sum);
-                }
-            }
-        }
-        out
-    }
-}
+// The independent glTF skinning reference shared with the formats crate's asset tests (it shares
+// no code with `skinfield_formats::gltf_io` or the runtime).
+#[path = "../../formats/tests/gltf_reference/mod.rs"]
+mod gltf_reference;
+use gltf_reference::Reference;
 
 fn trainer(args: &[&str]) -> (i32, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
@@ -215,7 +73,7 @@ fn cesium_man_walk_matches_the_gltf_reference() {
     let r = Reference::open(&asset);
     let mut moved = 0.0f64;
     for (t, got) in &frames {
-        let want = r.skinned(&r.worlds(&r.locals(0, *t)));
+        let want = r.skinned(0, &r.worlds(&r.locals(&[0], *t)));
         assert_eq!(got.len(), want.len());
         assert_eq!(got.len(), 3273, "CesiumMan has 3273 vertices");
         let worst = got
@@ -234,7 +92,7 @@ fn cesium_man_walk_matches_the_gltf_reference() {
     // The walk moves the mesh (the comparison is not between rest poses), and a time past the
     // end holds the last key.
     assert!(moved > 0.05, "{moved}");
-    let end = r.skinned(&r.worlds(&r.locals(0, 1e9)));
+    let end = r.skinned(0, &r.worlds(&r.locals(&[0], 1e9)));
     assert!(
         frames[4]
             .1
@@ -317,7 +175,7 @@ fn model_weights_drive_the_matching_skin() {
     // (checked against an f64 forward pass in the runtime's own tests) in f64. The glTF skin's
     // joint list and the importer's skeleton order can differ: map through joint names.
     let r = Reference::open(&asset);
-    let worlds = r.worlds(&r.locals(0, 0.6));
+    let worlds = r.worlds(&r.locals(&[0], 0.6));
     let gskin = r.doc.skins().next().unwrap();
     let data = |b: gltf::Buffer<'_>| Some(&r.buffers[b.index()].0[..]);
     let ibm: Vec<DMat4> = gskin

@@ -12,8 +12,10 @@ use glam::{DMat4, DQuat, DVec3, Mat4, Vec3};
 pub type Trs = (DVec3, DQuat, DVec3);
 
 pub struct Reference {
-    doc: gltf::Document,
-    buffers: Vec<gltf::buffer::Data>,
+    /// The parsed document.
+    pub doc: gltf::Document,
+    /// Its buffers, loaded by the gltf crate's own importer.
+    pub buffers: Vec<gltf::buffer::Data>,
 }
 
 impl Reference {
