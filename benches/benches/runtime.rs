@@ -14,7 +14,7 @@ use candle_core::{DType, Device, Tensor};
 use criterion::{BenchmarkId, Criterion, SamplingMode, Throughput};
 use glam::Vec3;
 use rayon::ThreadPool;
-use skinfield_benches::{points, pose, rng, vinecs_skf};
+use skinfield_benches::{random_points, random_pose, rng, vinecs_bytes};
 use skinfield_formats::skf::{Net, SkfView};
 use skinfield_formats::{Pose, pose_features};
 use skinfield_runtime::parallel::run_parallel;
@@ -58,13 +58,13 @@ fn setup(n: usize, bytes: &[u8]) -> Setup {
     let mut scalar = model.clone();
     scalar.set_kernel(Kernel::Scalar).expect("scalar kernel");
     let mut r = rng(7 + n as u64);
-    let pts = points(n, &mut r);
+    let pts = random_points(n, &mut r);
     let normals = pts
         .iter()
         .map(|p| (*p - Vec3::Y).normalize_or(Vec3::Y))
         .collect();
     let mesh = BoundMesh::bind(&model, &pts).expect("bind");
-    let pose = pose(model.skeleton(), &mut r, 0.6);
+    let pose = random_pose(model.skeleton(), &mut r, 0.6);
     let candle = CandleNet::new(bytes, &pts, &model, &pose);
     Setup {
         model,
@@ -233,7 +233,7 @@ impl CandleNet {
 }
 
 fn benches(c: &mut Criterion) {
-    let bytes = vinecs_skf(JOINTS, 1);
+    let bytes = vinecs_bytes(JOINTS, 1);
     let pools = pools();
     {
         let (m, k, n) = PEAK;
@@ -390,7 +390,7 @@ fn main() {
         .configure_from_args();
     benches(&mut c);
     c.final_summary();
-    let model = SkinNetModel::from_skf(&vinecs_skf(JOINTS, 1)).expect("model");
+    let model = SkinNetModel::from_skf(&vinecs_bytes(JOINTS, 1)).expect("model");
     table(
         model.macs_per_vertex(),
         model.config().macs_per_vertex(Net::Skin),

@@ -9,9 +9,12 @@ use skinfield_formats::math::rotvec_to_quat;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel};
 use skinfield_formats::{Pose, Skeleton, Transform};
 
+/// Canonical bounding-box minimum of the fixture models (a person-sized box, metres).
 pub const BBOX_MIN: [f32; 3] = [-0.6, -0.1, -0.3];
+/// Canonical bounding-box maximum of the fixture models.
 pub const BBOX_MAX: [f32; 3] = [0.6, 1.8, 0.3];
 
+/// The seeded generator every fixture draws from.
 pub fn rng(seed: u64) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(seed)
 }
