@@ -15,7 +15,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 use skinfield_formats::{Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
-use skinfield_runtime::gpu::{GpuSkinner, Skinning};
+use skinfield_runtime::gpu::{GpuSkinner, Skinning, headless_device};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 
 fn vertex_counts() -> Vec<usize> {
@@ -26,21 +26,18 @@ fn vertex_counts() -> Vec<usize> {
 }
 
 fn bench_gpu(c: &mut Criterion) {
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let Ok(adapter) =
-        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-    else {
-        eprintln!("skipping GPU bench: no wgpu adapter (install mesa-vulkan-drivers for lavapipe)");
-        return;
+    let (adapter, device, queue) = match headless_device(wgpu::Limits::default()) {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("skipping GPU bench: {e} (install mesa-vulkan-drivers for lavapipe)");
+            return;
+        }
     };
     let info = adapter.get_info();
     eprintln!(
         "GPU bench on {} ({:?}, {:?})",
         info.name, info.device_type, info.backend
     );
-    let (device, queue) =
-        pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).unwrap();
 
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let joints: usize = 24;

@@ -9,26 +9,24 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 use skinfield_formats::{Pose, Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
-use skinfield_runtime::gpu::{GpuError, GpuSkinner, SkinnedVertex, Skinning, WeightFormat};
+use skinfield_runtime::gpu::{
+    GpuError, GpuSkinner, SkinnedVertex, Skinning, WeightFormat, headless_device,
+};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 
 const TOL: f64 = 1e-4;
 
 /// A device (and whether its adapter runs `unpack2x16float`), or `None` to skip.
 fn device_with(limits: wgpu::Limits) -> Option<(wgpu::Device, wgpu::Queue, bool)> {
-    let instance =
-        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let adapter = match pollster::block_on(
-        instance.request_adapter(&wgpu::RequestAdapterOptions::default()),
-    ) {
-        Ok(a) => a,
+    let (adapter, device, queue) = match headless_device(limits) {
+        Ok(d) => d,
         Err(e) => {
             assert!(
                 std::env::var("CI").as_deref() != Ok("true"),
-                "CI=true but no wgpu adapter ({e}): install mesa-vulkan-drivers (lavapipe)"
+                "CI=true but no wgpu device ({e}): install mesa-vulkan-drivers (lavapipe)"
             );
             eprintln!(
-                "skipping GPU test: no wgpu adapter ({e}); install mesa-vulkan-drivers for lavapipe"
+                "skipping GPU test: no wgpu device ({e}); install mesa-vulkan-drivers for lavapipe"
             );
             return None;
         }
@@ -38,13 +36,6 @@ fn device_with(limits: wgpu::Limits) -> Option<(wgpu::Device, wgpu::Queue, bool)
         "GPU tests on {} ({:?}, {:?})",
         info.name, info.device_type, info.backend
     );
-    let desc = wgpu::DeviceDescriptor {
-        label: Some("skinfield test"),
-        required_limits: limits,
-        ..Default::default()
-    };
-    let (device, queue) =
-        pollster::block_on(adapter.request_device(&desc)).expect("request_device");
     let unpack = adapter
         .get_downlevel_capabilities()
         .flags

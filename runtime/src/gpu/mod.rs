@@ -104,4 +104,29 @@ pub enum GpuError {
     /// The read-back callback never ran.
     #[error("GPU read-back: the map callback was dropped")]
     MapDropped,
+    /// No adapter ([`headless_device`]).
+    #[error("no wgpu adapter: {0}")]
+    NoAdapter(#[from] wgpu::RequestAdapterError),
+    /// The adapter refused the device ([`headless_device`]).
+    #[error("wgpu request_device: {0}")]
+    RequestDevice(#[from] wgpu::RequestDeviceError),
+}
+
+/// A device and queue of the default adapter, without a window, for tools, tests and benches
+/// (an engine passes its own device to [`GpuSkinner`] instead). The backends come from the
+/// environment (`WGPU_BACKEND`); on a machine without a GPU, Mesa's lavapipe serves.
+pub fn headless_device(
+    limits: wgpu::Limits,
+) -> Result<(wgpu::Adapter, wgpu::Device, wgpu::Queue), GpuError> {
+    let instance =
+        wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter =
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))?;
+    let desc = wgpu::DeviceDescriptor {
+        label: Some("skinfield headless"),
+        required_limits: limits,
+        ..Default::default()
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&desc))?;
+    Ok((adapter, device, queue))
 }

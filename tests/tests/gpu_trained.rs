@@ -1,0 +1,131 @@
+//! A *trained* SkinNet on the GPU: train briefly on the tiny synthetic capture (warm start and
+//! silhouette iterations, so the weights are no longer their random initialisation), export the
+//! `.skf`, and skin the capture's full template in its held-out test poses on the GPU and with
+//! the runtime's CPU path. Weights, positions and normals agree within 1e-4, LBS and DQS.
+//!
+//! Runs on any wgpu adapter, Mesa's lavapipe included. Without one the test skips with a
+//! message, except under `CI=true`, where it fails.
+
+use glam::{Mat4, Vec3};
+use skinfield_formats::capture::load_capture;
+use skinfield_formats::skf::SkfView;
+use skinfield_formats::{pose_feature_count, pose_features};
+use skinfield_runtime::gpu::{GpuSkinner, SkinnedVertex, Skinning, headless_device};
+use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
+use skinfield_trainer::skinnet::export::to_skf_model;
+use skinfield_trainer::synth::{SynthConfig, synthesize};
+use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
+use skinfield_trainer::train::{TrainConfig, Trainer};
+
+const TOL: f32 = 1e-4;
+
+#[test]
+fn trained_model_on_the_gpu_equals_the_cpu_path() {
+    let (adapter, device, queue) = match headless_device(wgpu::Limits::default()) {
+        Ok(d) => d,
+        Err(e) => {
+            assert!(
+                std::env::var("CI").as_deref() != Ok("true"),
+                "CI=true but no wgpu device ({e}): install mesa-vulkan-drivers (lavapipe)"
+            );
+            eprintln!("skipping GPU test: {e}; install mesa-vulkan-drivers for lavapipe");
+            return;
+        }
+    };
+    eprintln!("GPU test on {}", adapter.get_info().name);
+
+    let dir = tempfile::tempdir().unwrap();
+    synthesize(dir.path(), &SynthConfig::tiny()).unwrap();
+    let capture = load_capture(dir.path()).unwrap();
+    let initial = initial_weights(&capture).unwrap();
+    let data = train_data(&capture, &initial, &DataOptions::default()).unwrap();
+    let config = TrainConfig {
+        warm_start_iterations: 15,
+        iterations: 5,
+        batch: 2,
+        ..TrainConfig::default()
+    };
+    let (warm, image) = (config.warm_start_iterations, config.iterations);
+    let mut trainer = Trainer::new(data, config, false).unwrap();
+    for _ in 0..warm {
+        trainer.warm_step().unwrap();
+    }
+    for _ in 0..image {
+        trainer.step().unwrap();
+    }
+    let bytes = to_skf_model(trainer.net().unwrap(), &capture.skeleton)
+        .unwrap()
+        .to_bytes()
+        .unwrap();
+    let view = SkfView::parse(&bytes).unwrap();
+    let cpu_net = SkinNet::from_view(&view).unwrap();
+
+    let template = &capture.template;
+    let (positions, normals) = (&template.positions, &template.normals);
+    let n = positions.len();
+    let j = capture.skeleton.len();
+    let skinner = GpuSkinner::new(&device).unwrap();
+    let model = skinner.bind_model(&device, &view).unwrap();
+    let mesh = skinner
+        .bind_mesh(&device, &queue, &model, positions, normals)
+        .unwrap();
+    let cpu_mesh = BoundMesh::bind(&cpu_net, positions).unwrap();
+    let mut cpu_frame = FrameState::new(&cpu_net);
+    let mut scratch = Scratch::new(&cpu_net);
+    let mut features = vec![0.0; pose_feature_count(j)];
+    let mut mats = vec![Mat4::IDENTITY; j];
+    let (mut cpu_p, mut cpu_n) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n]);
+    let mut cpu_w = vec![0.0; n * j];
+    let mut worst = 0.0f32;
+    for &f in &capture.test_frames {
+        let pose = &capture.poses[f];
+        pose_features(&capture.skeleton, pose, capture.up_axis, &mut features).unwrap();
+        capture.skeleton.skinning_matrices(pose, &mut mats).unwrap();
+        cpu_frame.set_pose(&cpu_net, pose).unwrap();
+        for (mode, method) in [
+            (Skinning::Linear, Method::Lbs),
+            (Skinning::DualQuaternion, Method::Dqs),
+        ] {
+            skinner
+                .skin(&device, &queue, &mesh, &mats, &features, mode)
+                .unwrap();
+            let weights = mesh.read_weights(&device, &queue).unwrap();
+            let out: Vec<SkinnedVertex> = mesh.read_vertices(&device, &queue).unwrap();
+            SkinJob {
+                model: &cpu_net,
+                mesh: &cpu_mesh,
+                frame: &cpu_frame,
+                method,
+                first_vertex: 0,
+                rest_normals: Some(normals),
+                rest_tangents: None,
+                out_positions: &mut cpu_p,
+                out_normals: Some(&mut cpu_n),
+                out_tangents: None,
+                out_weights: Some(&mut cpu_w),
+            }
+            .run(&mut scratch)
+            .unwrap();
+            for (k, (g, c)) in weights.iter().zip(&cpu_w).enumerate() {
+                assert!((g - c).abs() <= TOL, "frame {f} {mode:?} weight {k}: {g} vs {c}");
+            }
+            for v in 0..n {
+                for (what, g, c) in [
+                    ("position", &out[v].position[..3], cpu_p[v]),
+                    ("normal", &out[v].normal[..3], cpu_n[v]),
+                ] {
+                    let d = (Vec3::from_slice(g) - c).abs().max_element();
+                    worst = worst.max(d);
+                    assert!(d <= TOL, "frame {f} {mode:?} {what} of vertex {v}: {g:?} vs {c}");
+                }
+            }
+        }
+    }
+    // The model is trained, not uniform: its weights differ from the uniform blend somewhere.
+    let spread = cpu_w
+        .chunks(j)
+        .map(|w| w.iter().fold(0.0f32, |m, &x| m.max(x)))
+        .fold(0.0f32, f32::max);
+    assert!(spread > 0.5, "max weight {spread}: the model did not train");
+    eprintln!("{n} vertices, {} test poses: worst GPU − CPU {worst:.2e}", capture.test_frames.len());
+}
