@@ -171,6 +171,69 @@ pub(crate) mod fixtures {
         with_affine_attributes(positions, triangles)
     }
 
+    /// The same sphere with a UV seam: the meridian at longitude 0 is duplicated (`u` = 0 on one
+    /// copy, 1 on the other), as texture-mapped meshes store it.
+    pub fn seam_sphere(rings: u32, segments: u32) -> Template {
+        let mut positions = vec![Vec3::Y];
+        let mut uvs = vec![Vec2::new(0.5, 0.0)];
+        for r in 1..rings {
+            let phi = core::f32::consts::PI * r as f32 / rings as f32;
+            for s in 0..=segments {
+                let theta = core::f32::consts::TAU * (s % segments) as f32 / segments as f32;
+                positions.push(Vec3::new(
+                    phi.sin() * theta.cos(),
+                    phi.cos(),
+                    phi.sin() * theta.sin(),
+                ));
+                uvs.push(Vec2::new(
+                    s as f32 / segments as f32,
+                    r as f32 / rings as f32,
+                ));
+            }
+        }
+        positions.push(Vec3::NEG_Y);
+        uvs.push(Vec2::new(0.5, 1.0));
+        let south = positions.len() as u32 - 1;
+        let at = |r: u32, s: u32| 1 + (r - 1) * (segments + 1) + s;
+        let mut triangles = Vec::new();
+        for s in 0..segments {
+            triangles.push([0, at(1, s + 1), at(1, s)]);
+            triangles.push([south, at(rings - 1, s), at(rings - 1, s + 1)]);
+            for r in 1..rings - 1 {
+                let (a, b, c, d) = (at(r, s), at(r, s + 1), at(r + 1, s), at(r + 1, s + 1));
+                triangles.push([a, b, d]);
+                triangles.push([a, d, c]);
+            }
+        }
+        let mut t = with_affine_attributes(positions, triangles);
+        t.uvs = Some(uvs);
+        t
+    }
+
+    /// Whether the mesh is closed once vertices at equal positions are welded: every welded
+    /// edge used exactly once in each direction (a seam that opened would leave edges used once).
+    pub fn closed_when_welded(t: &Template) -> bool {
+        let mut ids = std::collections::HashMap::new();
+        let weld: Vec<usize> = t
+            .positions
+            .iter()
+            .map(|p| {
+                let next = ids.len();
+                *ids.entry(p.to_array().map(f32::to_bits)).or_insert(next)
+            })
+            .collect();
+        let mut directed = std::collections::HashMap::new();
+        for tri in &t.triangles {
+            for k in 0..3 {
+                let e = (weld[tri[k] as usize], weld[tri[(k + 1) % 3] as usize]);
+                *directed.entry(e).or_insert(0) += 1;
+            }
+        }
+        directed
+            .iter()
+            .all(|(&(a, b), &c)| c == 1 && directed.get(&(b, a)) == Some(&1))
+    }
+
     /// Attributes that are affine functions of the position (so interpolation reproduces them).
     pub fn with_affine_attributes(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Template {
         let mut t = Template {

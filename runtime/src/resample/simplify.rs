@@ -147,7 +147,9 @@ pub fn simplify(source: &Template, target: Target) -> Result<Resampled, Resample
 
 #[cfg(test)]
 mod tests {
-    use super::super::fixtures::{color_of, label_of, sphere, uv_of};
+    use super::super::fixtures::{
+        closed_when_welded, color_of, label_of, seam_sphere, sphere, uv_of,
+    };
     use super::*;
 
     #[test]
@@ -208,6 +210,20 @@ mod tests {
         );
         let euler = t.vertex_count() as i64 - edges.len() as i64 / 2 + t.triangles.len() as i64;
         assert_eq!(euler, 2);
+    }
+
+    #[test]
+    fn a_uv_seam_stays_closed_and_keeps_both_sides_uvs() {
+        let s = seam_sphere(30, 40);
+        assert!(closed_when_welded(&s));
+        let r = simplify(&s, Target::Vertices(300)).unwrap();
+        assert!(closed_when_welded(&r.template), "the seam opened");
+        // Kept vertices keep their own side's UV (u = 0 and u = 1 copies both survive).
+        let uvs = r.template.uvs.as_ref().unwrap();
+        for (v, p) in r.source.iter().enumerate() {
+            assert_eq!(uvs[v], s.uvs.as_ref().unwrap()[p.vertices[0] as usize]);
+        }
+        assert!(uvs.iter().any(|uv| uv.x == 0.0) && uvs.iter().any(|uv| uv.x == 1.0));
     }
 
     #[test]

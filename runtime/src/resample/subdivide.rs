@@ -214,7 +214,9 @@ pub fn subdivide(source: &Template, target: Target) -> Result<Resampled, Resampl
 
 #[cfg(test)]
 mod tests {
-    use super::super::fixtures::{color_of, label_of, sphere, uv_of, with_affine_attributes};
+    use super::super::fixtures::{
+        closed_when_welded, color_of, label_of, seam_sphere, sphere, uv_of, with_affine_attributes,
+    };
     use super::*;
     use skinfield_formats::mesh::PartLabel;
 
@@ -329,6 +331,14 @@ mod tests {
             "each side keeps its own UVs"
         );
         assert_eq!(t.triangles.len(), 4);
+    }
+
+    #[test]
+    fn a_uv_sphere_seam_stays_closed() {
+        let s = seam_sphere(8, 10);
+        let t = subdivide(&s, Target::Vertices(2_000)).unwrap().template;
+        assert!(closed_when_welded(&t), "the seam opened");
+        assert!((2_000..=2_001).contains(&t.vertex_count()));
     }
 
     #[test]
