@@ -25,6 +25,7 @@ pub mod simplify;
 pub mod subdivide;
 pub mod transfer;
 
+use skinfield_formats::SkinError;
 use skinfield_formats::Template;
 use skinfield_formats::mesh::MeshError;
 
@@ -97,14 +98,9 @@ pub enum ResampleError {
         /// The source's vertex count.
         vertices: usize,
     },
-    /// The skin to transfer does not belong to the source mesh.
-    #[error("`skin` has {skin} vertices, the source mesh {vertices}")]
-    SkinLength {
-        /// Vertices in the skin.
-        skin: usize,
-        /// Vertices in the source.
-        vertices: usize,
-    },
+    /// The transferred skin is invalid.
+    #[error("`skin`: {0}")]
+    Skin(#[from] SkinError),
 }
 
 /// A resampled template and, for each of its vertices, where it lies on the source surface.

@@ -146,15 +146,7 @@ pub fn transfer_skin(
     let (mut joints, mut weights) = (Vec::new(), Vec::new());
     let mut row: Vec<(u32, f32)> = Vec::new();
     for (i, p) in points.iter().enumerate() {
-        p.check(i, n).map_err(|_| ResampleError::SkinLength {
-            skin: n,
-            vertices: p
-                .vertices
-                .iter()
-                .map(|&v| v as usize + 1)
-                .max()
-                .unwrap_or(0),
-        })?;
+        p.check(i, n)?;
         row.clear();
         for k in 0..3 {
             if p.weights[k] == 0.0 {
@@ -173,13 +165,13 @@ pub fn transfer_skin(
         weights.extend(row.iter().map(|&(_, w)| w));
         offsets.push(joints.len() as u32);
     }
-    // Convex combinations of normalised rows are normalised: `new` cannot refuse them.
-    StaticSkin::new(offsets, joints, weights, skin.joint_count()).map_err(|_| {
-        ResampleError::SkinLength {
-            skin: n,
-            vertices: points.len(),
-        }
-    })
+    // Convex combinations of valid rows are valid: `new` has nothing to refuse.
+    Ok(StaticSkin::new(
+        offsets,
+        joints,
+        weights,
+        skin.joint_count(),
+    )?)
 }
 
 #[cfg(test)]
@@ -243,6 +235,9 @@ mod tests {
         ];
         let out = transfer_skin(&skin, &points).unwrap();
         assert_eq!(out.to_dense(), vec![0.0, 0.5, 0.5, 0.5, 0.25, 0.25]);
-        assert!(transfer_skin(&skin, &[SourcePoint::vertex(2)]).is_err());
+        assert!(matches!(
+            transfer_skin(&skin, &[SourcePoint::vertex(2)]),
+            Err(ResampleError::SourceIndex { vertex: 2, .. })
+        ));
     }
 }
