@@ -15,6 +15,8 @@
 //!    vertex range (so an engine's job system can split a frame; the `rayon` feature has a
 //!    ready-made parallel run in [`parallel`]).
 //! 4. **Static skinning**: [`StaticSkinJob`] does the same with a [`StaticSkin`].
+//! 5. **Level of detail** (`resample` feature): the `resample` module simplifies or subdivides
+//!    a canonical mesh at load time; the result binds like any other mesh, same weight file.
 //!
 //! No function here panics on any input: bad slices, NaN poses and mismatched parts are typed
 //! [`RuntimeError`]s naming the field.
@@ -33,6 +35,8 @@ pub mod kernels;
 pub mod model;
 #[cfg(feature = "rayon")]
 pub mod parallel;
+#[cfg(feature = "resample")]
+pub mod resample;
 pub mod skinning;
 pub mod static_job;
 

@@ -8,7 +8,6 @@ pub mod heat;
 pub mod losses;
 pub mod optim;
 pub mod raster;
-pub mod simplify;
 pub mod skinnet;
 pub mod synth;
 pub mod train;

@@ -34,6 +34,8 @@ enum Command {
     Demo(cli::demo::Args),
     /// World-space skinned positions of a glTF asset at clip times, computed by the runtime.
     Pose(cli::pose::Args),
+    /// Simplify or subdivide a template to vertex counts (glTF), timing resample and bind.
+    Resample(cli::resample::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -52,6 +54,7 @@ fn main() {
         Command::Train(args) => cli::train::run(args),
         Command::Demo(args) => cli::demo::run(args),
         Command::Pose(args) => cli::pose::run(args),
+        Command::Resample(args) => cli::resample::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

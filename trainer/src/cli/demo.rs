@@ -190,6 +190,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             frame: Some(frame),
             camera: 1,
             max_error_cm: 2.0,
+            templates: Vec::new(),
             out: out.join(name),
         })?;
     }

@@ -1,5 +1,7 @@
-//! `trainer eval --capture DIR --weights SPEC [--weights SPEC …] [--json]`: scores skinnings
-//! against the capture's ground-truth test meshes (M2S, S2M, Chamfer in centimetres).
+//! `trainer eval --capture DIR --weights SPEC [--weights SPEC …] [--template FILE] [--json]`:
+//! scores skinnings against the capture's ground-truth test meshes (M2S, S2M, Chamfer in
+//! centimetres). `--template` poses another mesh over the same canonical space instead of the
+//! capture's template (e.g. one written by `trainer resample`; SkinNet rows only).
 
 use std::path::PathBuf;
 
@@ -7,7 +9,8 @@ use anyhow::Context;
 use clap::Args as ClapArgs;
 use skinfield_formats::capture::load_capture;
 use skinfield_trainer::eval::{
-    DEFAULT_SAMPLES, EvalOptions, Skinning, evaluate, rows_to_json, rows_to_table,
+    DEFAULT_SAMPLES, EvalOptions, Skinning, evaluate_template, load_template, rows_to_json,
+    rows_to_table,
 };
 
 /// Arguments of `trainer eval`.
@@ -20,6 +23,10 @@ pub struct Args {
     /// (ground-truth weights, LBS) or `oracle-dqs` (ground-truth weights, DQS). Repeatable.
     #[arg(long = "weights", required = true)]
     pub weights: Vec<Skinning>,
+    /// Pose this glTF template (any resolution, the capture's canonical space) instead of the
+    /// capture's own; only `skf:FILE` rows can pose a mesh with other vertices.
+    #[arg(long)]
+    pub template: Option<PathBuf>,
     /// Print `{"rows":[…]}` JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -39,9 +46,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         samples: args.samples,
         seed: args.seed,
     };
+    let template = match &args.template {
+        Some(path) => load_template(path)?,
+        None => capture.template.clone(),
+    };
     let mut rows = Vec::with_capacity(args.weights.len());
     for skinning in &args.weights {
-        let row = evaluate(&capture, skinning, &options)
+        let row = evaluate_template(&capture, &template, skinning, &options)
             .with_context(|| format!("evaluating `{}`", skinning.method_name()))?;
         rows.push(row);
     }

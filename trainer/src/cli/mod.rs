@@ -6,5 +6,6 @@ pub mod heat;
 pub mod inspect;
 pub mod pose;
 pub mod render;
+pub mod resample;
 pub mod synth;
 pub mod train;

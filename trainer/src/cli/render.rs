@@ -1,14 +1,17 @@
 //! `trainer render`: pictures of a posed mesh — over a captured image (`--kind overlay`, paper
-//! Fig. 3) or coloured by per-vertex M2S error (`--kind error`, paper Fig. 5) — as PNG.
+//! Fig. 3) or coloured by per-vertex M2S error (`--kind error`, paper Fig. 5) — as PNG. With
+//! several `--template` files (e.g. from `trainer resample`) the pictures of each, posed in the
+//! same frame, are put side by side in one PNG.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args as ClapArgs, ValueEnum};
 use glam::Vec3;
+use skinfield_formats::Template;
 use skinfield_formats::capture::{load_capture, write_image_png};
 use skinfield_trainer::eval::render::{error_image, overlay};
-use skinfield_trainer::eval::{PreparedSkinning, Skinning, per_vertex_m2s};
+use skinfield_trainer::eval::{PreparedSkinning, Skinning, load_template, per_vertex_m2s};
 
 /// Which picture to draw.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -40,6 +43,9 @@ pub struct Args {
     /// Error mapped to red in `--kind error`, centimetres.
     #[arg(long, default_value_t = 2.0)]
     pub max_error_cm: f32,
+    /// Pose these glTF templates instead of the capture's (repeatable; side by side, in order).
+    #[arg(long = "template")]
+    pub templates: Vec<PathBuf>,
     /// Output PNG.
     #[arg(long)]
     pub out: PathBuf,
@@ -65,18 +71,54 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     let skinning = PreparedSkinning::new(&capture, &args.weights)
         .with_context(|| format!("loading `{}`", args.weights.method_name()))?;
-    let posed = skinning.pose_frame(&capture, frame)?;
-    let triangles = &capture.template.triangles;
-    let rgb = match args.kind {
+    let templates = if args.templates.is_empty() {
+        vec![capture.template.clone()]
+    } else {
+        args.templates
+            .iter()
+            .map(|p| load_template(p))
+            .collect::<Result<Vec<_>, _>>()?
+    };
+    let panels = templates
+        .iter()
+        .map(|t| panel(&args, &capture, camera, &skinning, t, frame))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    // Side by side: row y of the result is row y of every panel in turn.
+    let rgb: Vec<Vec3> = (0..h)
+        .flat_map(|y| panels.iter().flat_map(move |p| &p[y * w..(y + 1) * w]))
+        .copied()
+        .collect();
+    let width = u32::try_from(w * panels.len()).context("--template: picture too wide")?;
+    write_image_png(&args.out, width, camera.height, &rgb)?;
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// One picture of `template` posed by `skinning` in `frame`.
+fn panel(
+    args: &Args,
+    capture: &skinfield_formats::capture::Capture,
+    camera: &skinfield_formats::Camera,
+    skinning: &PreparedSkinning,
+    template: &Template,
+    frame: usize,
+) -> anyhow::Result<Vec<Vec3>> {
+    let posed = skinning.pose_rest(capture, &template.positions, frame)?;
+    let triangles = &template.triangles;
+    Ok(match args.kind {
         Kind::Overlay => {
             let image = capture.load_image(args.camera, frame)?;
             overlay(camera, &image.rgb, &posed, triangles)?
         }
         Kind::Error => {
-            let error = per_vertex_m2s(&capture, frame, &posed)?;
+            let error = per_vertex_m2s(capture, frame, &posed)?;
             let mean_cm = 100.0 * error.iter().map(|&e| f64::from(e)).sum::<f64>()
                 / error.len().max(1) as f64;
-            println!("frame {frame}: mean per-vertex distance to the ground truth {mean_cm:.3} cm");
+            println!(
+                "frame {frame}, {} vertices: mean per-vertex distance to the ground truth {mean_cm:.3} cm",
+                template.vertex_count()
+            );
             error_image(
                 camera,
                 &posed,
@@ -86,8 +128,5 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Vec3::ONE,
             )?
         }
-    };
-    write_image_png(&args.out, camera.width, camera.height, &rgb)?;
-    println!("wrote {}", args.out.display());
-    Ok(())
+    })
 }

@@ -16,6 +16,12 @@
 //! the gaps between methods. Each frame's samples come from the same seed for every method, so
 //! rows are compared with common random numbers.
 //!
+//! # Templates at other resolutions
+//!
+//! [`evaluate_template`] poses another mesh over the capture's canonical space (e.g. one of
+//! `trainer resample`) with SkinNet and compares it with the same ground truth: both surfaces
+//! are sampled uniformly by area, so the metrics compare surfaces whatever their vertex counts.
+//!
 //! # Methods ([`Skinning`])
 //!
 //! | argument | row | weights | blend |
@@ -37,9 +43,10 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 use glam::Vec3;
-use skinfield_formats::StaticSkin;
 use skinfield_formats::capture::{Capture, CaptureError};
+use skinfield_formats::gltf_io::load_gltf;
 use skinfield_formats::skf::{SkfFileError, read_skf_file};
+use skinfield_formats::{StaticSkin, Template};
 use skinfield_runtime::SkinNetModel;
 
 pub use posing::{Blend, PosingError, pose_static};
@@ -157,6 +164,27 @@ pub enum EvalError {
         /// What is wrong.
         reason: String,
     },
+    /// A static skinning was asked to pose a template other than the capture's (its weights are
+    /// per vertex of the capture's template; only SkinNet poses any mesh).
+    #[error(
+        "`{method}` has weights for the capture's {weights} vertices, the template has {vertices}: only `skf:FILE` (SkinNet) poses another template"
+    )]
+    TemplateMismatch {
+        /// The row.
+        method: &'static str,
+        /// Vertices the weights cover.
+        weights: usize,
+        /// Vertices of the template.
+        vertices: usize,
+    },
+    /// A template file is unreadable or holds no mesh.
+    #[error("{}: {reason}", path.display())]
+    Template {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// The weights do not fit the template or the pose the skeleton.
     #[error("frame {frame}: {source}")]
     Posing {
@@ -255,6 +283,18 @@ impl PreparedSkinning {
 
     /// The template's positions posed for `frame`.
     pub fn pose_frame(&self, capture: &Capture, frame: usize) -> Result<Vec<Vec3>, EvalError> {
+        self.pose_rest(capture, &capture.template.positions, frame)
+    }
+
+    /// Canonical positions `rest` (the capture's template, or any mesh over the same canonical
+    /// space, e.g. a resampled one: SkinNet is queried at these positions) posed for `frame`.
+    /// Static weights pose only the capture's own template.
+    pub fn pose_rest(
+        &self,
+        capture: &Capture,
+        rest: &[Vec3],
+        frame: usize,
+    ) -> Result<Vec<Vec3>, EvalError> {
         let pose = capture.poses.get(frame).ok_or_else(|| {
             EvalError::Capture(CaptureError::Invalid {
                 file: capture.dir.join(skinfield_formats::capture::MANIFEST_FILE),
@@ -262,8 +302,14 @@ impl PreparedSkinning {
                 reason: format!("frame {frame} out of range"),
             })
         })?;
-        let rest = &capture.template.positions;
         match &self.weights {
+            Weights::Static { skin, .. } if skin.vertex_count() != rest.len() => {
+                Err(EvalError::TemplateMismatch {
+                    method: self.method,
+                    weights: skin.vertex_count(),
+                    vertices: rest.len(),
+                })
+            }
             Weights::Static { skin, blend } => {
                 pose_static(&capture.skeleton, skin, rest, pose, *blend)
                     .map_err(|source| EvalError::Posing { frame, source })
@@ -323,9 +369,21 @@ pub fn frame_seed(seed: u64, frame: usize) -> u64 {
         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
 }
 
-/// Scores the posed meshes of `positions_for(frame)` against the ground truth of every test frame.
+/// Scores the posed meshes of `positions_for(frame)` (the capture's template posed) against the
+/// ground truth of every test frame.
 pub fn evaluate_frames(
     capture: &Capture,
+    options: &EvalOptions,
+    positions_for: impl FnMut(usize) -> Result<Vec<Vec3>, EvalError>,
+) -> Result<Vec<FrameMetrics>, EvalError> {
+    evaluate_mesh_frames(capture, &capture.template.triangles, options, positions_for)
+}
+
+/// [`evaluate_frames`] for a posed mesh with its own `triangles` (any resolution: both
+/// surfaces are sampled by area, so the metrics compare surfaces, not vertex lists).
+pub fn evaluate_mesh_frames(
+    capture: &Capture,
+    triangles: &[[u32; 3]],
     options: &EvalOptions,
     mut positions_for: impl FnMut(usize) -> Result<Vec<Vec3>, EvalError>,
 ) -> Result<Vec<FrameMetrics>, EvalError> {
@@ -334,7 +392,6 @@ pub fn evaluate_frames(
             capture.dir.join(skinfield_formats::capture::MANIFEST_FILE),
         ));
     }
-    let triangles = &capture.template.triangles;
     let mut out = Vec::with_capacity(capture.test_frames.len());
     for &frame in &capture.test_frames {
         let truth = capture.evaluation_gt_mesh(frame)?;
@@ -346,7 +403,7 @@ pub fn evaluate_frames(
             },
             Surface {
                 positions: &truth,
-                triangles,
+                triangles: &capture.template.triangles,
             },
             options.samples,
             frame_seed(options.seed, frame),
@@ -383,11 +440,48 @@ pub fn evaluate(
     skinning: &Skinning,
     options: &EvalOptions,
 ) -> Result<EvalRow, EvalError> {
+    evaluate_template(capture, &capture.template, skinning, options)
+}
+
+/// [`evaluate`] with `template` posed instead of the capture's own: a mesh over the same
+/// canonical space at any resolution (`trainer eval --template`). Only SkinNet (`skf:FILE`)
+/// poses a template whose vertices are not the capture's.
+pub fn evaluate_template(
+    capture: &Capture,
+    template: &Template,
+    skinning: &Skinning,
+    options: &EvalOptions,
+) -> Result<EvalRow, EvalError> {
     let prepared = PreparedSkinning::new(capture, skinning)?;
-    let frames = evaluate_frames(capture, options, |frame| {
-        prepared.pose_frame(capture, frame)
+    let frames = evaluate_mesh_frames(capture, &template.triangles, options, |frame| {
+        prepared.pose_rest(capture, &template.positions, frame)
     })?;
     Ok(average(prepared.method(), &frames))
+}
+
+/// The template of a glTF/GLB file: the mesh of its largest skin, else its first unskinned
+/// mesh (positions as stored). This is what `trainer resample` writes.
+pub fn load_template(path: &std::path::Path) -> Result<Template, EvalError> {
+    let doc = load_gltf(path).map_err(|e| EvalError::Template {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    })?;
+    let template = match doc.largest_skin() {
+        Some(skin) if skin.template.vertex_count() > 0 => skin.template.clone(),
+        _ => doc
+            .static_meshes
+            .first()
+            .map(|m| m.template.clone())
+            .ok_or_else(|| EvalError::Template {
+                path: path.to_owned(),
+                reason: "no mesh: expected a skinned character or a mesh node".into(),
+            })?,
+    };
+    template.validate().map_err(|e| EvalError::Template {
+        path: path.to_owned(),
+        reason: format!("`meshes`: {e}"),
+    })?;
+    Ok(template)
 }
 
 /// Distance (metres) from each vertex of a posed mesh to the ground-truth surface of `frame`:
@@ -402,5 +496,7 @@ pub fn per_vertex_m2s(
     Ok(surface::distances_to(posed, &bvh))
 }
 pub mod render;
+#[cfg(test)]
+mod template_tests;
 #[cfg(test)]
 mod tests;

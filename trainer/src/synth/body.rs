@@ -6,6 +6,7 @@
 use glam::{Vec2, Vec3};
 use skinfield_formats::mesh::area_weighted_normals;
 use skinfield_formats::{PartLabel, Template};
+use skinfield_runtime::resample::{Target, simplify_subset};
 
 use super::character::segment_distance;
 use super::marching::marching_tetrahedra;
@@ -293,7 +294,7 @@ fn simplify(
     target_vertices: usize,
 ) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     let (source, triangles) =
-        crate::simplify::simplify_subset(positions, triangles, target_vertices);
+        simplify_subset(positions, triangles, Target::Vertices(target_vertices));
     (
         source.iter().map(|&i| positions[i as usize]).collect(),
         triangles,

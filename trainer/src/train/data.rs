@@ -11,8 +11,8 @@
 
 use glam::Mat4;
 use skinfield_formats::capture::{Capture, CaptureError};
-use skinfield_formats::mesh::area_weighted_normals;
 use skinfield_formats::{StaticSkin, Template, pose_features};
+use skinfield_runtime::resample::{Target, simplify};
 
 use super::{Frame, TrainData, View};
 use crate::losses::silhouette::SilhouetteTarget;
@@ -63,31 +63,22 @@ pub fn initial_weights(capture: &Capture) -> Result<StaticSkin, DataError> {
     }
 }
 
-/// Simplifies `template` to about `target` vertices; returns the new template and, for each of
-/// its vertices, the index of the original vertex it is.
+/// Simplifies `template` to about `target` vertices (the runtime's simplifier, so the training
+/// template is what an engine's load-time LOD would be); returns the new template and, for each
+/// of its vertices, the index of the original vertex it is.
 #[must_use]
 pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u32>) {
     let n = template.vertex_count();
+    let identity = || (template.clone(), (0..n as u32).collect());
     if target == 0 || target >= n {
-        return (template.clone(), (0..n as u32).collect());
+        return identity();
     }
-    let (source, triangles) =
-        crate::simplify::simplify_subset(&template.positions, &template.triangles, target);
-    let positions = pick(&template.positions, &source);
-    let reduced = Template {
-        normals: area_weighted_normals(&positions, &triangles),
-        positions,
-        triangles,
-        uvs: template.uvs.as_ref().map(|a| pick(a, &source)),
-        colors: template.colors.as_ref().map(|a| pick(a, &source)),
-        part_labels: template.part_labels.as_ref().map(|a| pick(a, &source)),
-    };
-    (reduced, source)
-}
-
-/// The entries of `values` at `indices`.
-fn pick<T: Copy>(values: &[T], indices: &[u32]) -> Vec<T> {
-    indices.iter().map(|&i| values[i as usize]).collect()
+    // The capture loader validated the template and the target is below its count, so the
+    // simplifier has nothing to refuse; an invalid template trains at full resolution.
+    match simplify(template, Target::Vertices(target)) {
+        Ok(r) => (r.template, r.source.iter().map(|p| p.vertices[0]).collect()),
+        Err(_) => identity(),
+    }
 }
 
 /// Builds the stage-1 training data from `capture`'s training frames.

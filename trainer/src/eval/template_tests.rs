@@ -1,0 +1,178 @@
+//! Resampled templates through evaluation, rendering and a trained model: SkinNet poses a mesh
+//! of any resolution over the capture's canonical space, static weights refuse to.
+
+use std::path::Path;
+
+use skinfield_formats::capture::{Capture, load_capture};
+use skinfield_formats::gltf_io::write_gltf_character;
+use skinfield_formats::skf::{ModelConfig, Net, SkfModel};
+use skinfield_runtime::resample::{Target, resample, transfer_skin};
+use skinfield_runtime::{BoundMesh, FrameState, Scratch, SkinNetModel, WeightsJob};
+
+use super::*;
+use crate::synth::{SynthConfig, synthesize};
+
+const OPTIONS: EvalOptions = EvalOptions {
+    samples: 4000,
+    seed: 11,
+};
+
+fn tiny_capture(dir: &Path) -> Capture {
+    synthesize(dir, &SynthConfig::tiny()).unwrap();
+    load_capture(dir).unwrap()
+}
+
+/// A SkinNet that gives every point the root joint alone (zero weights, output bias e^30 for
+/// the root): every template it poses moves rigidly with the root, so its result is known.
+fn root_only_skf(capture: &Capture, path: &Path) {
+    let b = capture.template.bounds().unwrap();
+    let mut config = ModelConfig::vinecs(
+        capture.skeleton.len() as u32,
+        b.min.to_array(),
+        b.max.to_array(),
+    );
+    config.pe_frequencies = 2;
+    config.hidden_count = 3;
+    config.hidden = [8, 8, 8, 0, 0, 0, 0, 0];
+    let mut model = SkfModel {
+        config,
+        skeleton: capture.skeleton.clone(),
+        tensors: Vec::new(),
+    };
+    let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
+    let last = shapes.len() - 1;
+    for (i, (out, inp)) in shapes.into_iter().enumerate() {
+        let mut bias = vec![0.0; out];
+        if i == last {
+            bias[0] = 30.0;
+        }
+        model.push_layer(Net::Skin, i, vec![0.0; out * inp], out, inp, bias);
+    }
+    std::fs::write(path, model.to_bytes().unwrap()).unwrap();
+}
+
+#[test]
+fn a_subdivided_template_scores_like_the_original_surface_and_a_coarse_one_does_not() {
+    // Subdivision does not move the surface, so with a rigid (root-only) skinning the posed
+    // subdivided mesh *is* the posed original surface: equal metrics up to the sampling noise
+    // (different sample points on the same surface). A coarse simplification changes the surface.
+    let dir = tempfile::tempdir().unwrap();
+    let capture = tiny_capture(dir.path());
+    let skf = dir.path().join("root.skf");
+    root_only_skf(&capture, &skf);
+    let skinning = Skinning::Skf(skf);
+    let n = capture.template.vertex_count();
+    let original = evaluate(&capture, &skinning, &OPTIONS).unwrap();
+    let fine = resample(&capture.template, Target::Vertices(3 * n))
+        .unwrap()
+        .template;
+    let dense = evaluate_template(&capture, &fine, &skinning, &OPTIONS).unwrap();
+    assert!(
+        (dense.chamfer_cm - original.chamfer_cm).abs() < 0.02 * original.chamfer_cm,
+        "{dense:?} vs {original:?}"
+    );
+    // The same through the file `trainer resample` writes and `trainer eval --template` reads.
+    let file = dir.path().join("fine.glb");
+    let skin = transfer_skin(
+        &crate::train::data::initial_weights(&capture).unwrap(),
+        &resample(&capture.template, Target::Vertices(3 * n))
+            .unwrap()
+            .source,
+    )
+    .unwrap();
+    write_gltf_character(&file, &capture.skeleton, &fine, &skin, None).unwrap();
+    let loaded = load_template(&file).unwrap();
+    assert_eq!(loaded.triangles, fine.triangles);
+    assert_eq!(loaded.positions, fine.positions);
+    let coarse = resample(&capture.template, Target::Vertices(60))
+        .unwrap()
+        .template;
+    let rough = evaluate_template(&capture, &coarse, &skinning, &OPTIONS).unwrap();
+    assert!(
+        (rough.chamfer_cm - original.chamfer_cm).abs() > 0.05 * original.chamfer_cm,
+        "{rough:?} vs {original:?}"
+    );
+}
+
+#[test]
+fn static_weights_refuse_another_template_naming_the_method() {
+    let dir = tempfile::tempdir().unwrap();
+    let capture = tiny_capture(dir.path());
+    let coarse = resample(&capture.template, Target::Vertices(500))
+        .unwrap()
+        .template;
+    let e = evaluate_template(&capture, &coarse, &Skinning::Oracle, &OPTIONS).unwrap_err();
+    assert!(matches!(
+        e,
+        EvalError::TemplateMismatch {
+            method: "oracle",
+            ..
+        }
+    ));
+    assert!(e.to_string().contains("skf:FILE"), "{e}");
+    let e = load_template(&dir.path().join("missing.glb")).unwrap_err();
+    assert!(e.to_string().contains("missing.glb"), "{e}");
+}
+
+#[test]
+fn a_trained_model_poses_resampled_templates_without_nan() {
+    let dir = tempfile::tempdir().unwrap();
+    let capture = tiny_capture(dir.path());
+    let initial = crate::train::data::initial_weights(&capture).unwrap();
+    let options = crate::train::data::DataOptions {
+        train_vertices: 800,
+        ..Default::default()
+    };
+    let data = crate::train::data::train_data(&capture, &initial, &options).unwrap();
+    let skeleton = data.skeleton.clone();
+    let config = crate::train::TrainConfig {
+        iterations: 2,
+        warm_start_iterations: 3,
+        batch: 1,
+        checkpoint_every: 0,
+        seed: 1,
+        ..Default::default()
+    };
+    let mut trainer = crate::train::Trainer::new(data, config, false).unwrap();
+    trainer.run(&dir.path().join("work"), false).unwrap();
+    let bytes = crate::skinnet::export::to_skf_model(trainer.net().unwrap(), &skeleton)
+        .unwrap()
+        .to_bytes()
+        .unwrap();
+    let model = SkinNetModel::from_skf(&bytes).unwrap();
+    let j = model.joint_count();
+    let n = capture.template.vertex_count();
+    for target in [n / 4, 2 * n] {
+        let t = resample(&capture.template, Target::Vertices(target))
+            .unwrap()
+            .template;
+        let mesh = BoundMesh::bind(&model, &t.positions).unwrap();
+        let mut scratch = Scratch::new(&model);
+        for &frame in &capture.test_frames {
+            let mut state = FrameState::new(&model);
+            state.set_pose(&model, &capture.poses[frame]).unwrap();
+            let mut weights = vec![f32::NAN; t.vertex_count() * j];
+            WeightsJob {
+                model: &model,
+                mesh: &mesh,
+                frame: &state,
+                first_vertex: 0,
+                out_weights: &mut weights,
+            }
+            .run(&mut scratch)
+            .unwrap();
+            for row in weights.chunks_exact(j) {
+                assert!(row.iter().all(|w| w.is_finite() && *w >= 0.0));
+                assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-3);
+            }
+            let posed = posing::pose_dense_lbs(
+                &capture.skeleton,
+                &weights,
+                &t.positions,
+                &capture.poses[frame],
+            )
+            .unwrap();
+            assert!(posed.iter().all(|p| p.is_finite()), "frame {frame}");
+        }
+    }
+}
