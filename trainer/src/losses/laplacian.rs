@@ -6,7 +6,8 @@
 //! uniform operator is a constant sparse matrix, so the loss is a plain quadratic in the posed
 //! positions. One-rings come from [`MeshGraph`]: vertices at the same position (UV seams) are
 //! welded, so a seam vertex sees its whole ring rather than one side of it. The loss is the
-//! absolute Laplacian, as in Eq. 6 (not the change from the rest-pose Laplacian).
+//! absolute Laplacian of the positions it is given, as in Eq. 6; the trainer gives it the
+//! difference from the initial skinning by default (`train::LaplacianReference`).
 
 use candle_core::{Device, Result, Tensor};
 use glam::Vec3;

@@ -9,9 +9,14 @@
 //! for coverage), its contour's distance transform is sampled at each projected vertex, and those
 //! within [`BOUNDARY_RADIUS`] pixels are boundary vertices. This excludes contour-generator
 //! vertices hidden inside the silhouette (a hand in front of the torso). In the second term `x_p`
-//! is the projected vertex nearest to contour pixel `p` (over all vertices in front of the camera,
-//! as the paper writes it), found exactly with a uniform grid. Both selections are constants of
-//! the step; the norms are Euclidean, not squared, as in Eq. 10.
+//! is the projected *boundary* vertex (of `B_c`) nearest to contour pixel `p`, found exactly with
+//! a uniform grid. The paper says "its closest projected vertex"; taken over every vertex in
+//! front of the camera, that is often an interior vertex projecting just inside the contour,
+//! which the term then drags outwards: at the ground-truth poses of the built-in capture the
+//! contour term's mean gradient along the outward normal was −3.8e-3 over all vertices and
+//! −2.0e-4 over `B_c` (an unbiased loss has 0 there; `trainer/examples/silhouette_bias.rs`
+//! measures it). Both selections are constants of the step; the norms are Euclidean, not
+//! squared, as in Eq. 10.
 
 use std::sync::Arc;
 
@@ -372,8 +377,7 @@ pub fn silhouette_terms(
         let sel = uv.index_select(&Tensor::from_vec(b.clone(), b.len(), dev)?, 0)?;
         sample_distance(&target.dt, &sel)?.sum_all()?
     };
-    let candidates: Vec<u32> = (0..v as u32).filter(|&i| valid[i as usize]).collect();
-    let nearest = nearest_points(&values, &candidates, &target.contour);
+    let nearest = nearest_points(&values, &b, &target.contour);
     let contour = if nearest.is_empty() {
         zero
     } else {

@@ -10,7 +10,8 @@
 //!  + λ_part·L_part/(B·|R∩G|)`
 //!
 //! The paper sums every term; the means here make the weights independent of the template
-//! resolution, the image size and the number of cameras. Before the image losses a warm start
+//! resolution, the image size and the number of cameras. `L_lap` is taken of the posed mesh
+//! minus the same pose under the initial weights by default ([`LaplacianReference`]). Before the image losses a warm start
 //! regresses the initial weights (KL divergence, see [`Trainer::warm_step`]), so SkinNet starts
 //! from bone heat instead of from a uniform blend. Frame sampling draws from a generator seeded by `(seed, iteration)`, so a
 //! resumed run draws the same batches as an uninterrupted one.
@@ -40,7 +41,7 @@ use crate::losses::silhouette::{SilhouetteTarget, silhouette_terms};
 use crate::losses::skinning_reg::GeodesicSkinningReg;
 use crate::optim::Adam;
 use crate::skinnet::{PREFIX, SkinNet, encode_positions, softmax_last};
-pub use config::{ConfigError, LossWeights, TrainConfig};
+pub use config::{ConfigError, LaplacianReference, LossWeights, TrainConfig};
 
 /// One camera view of a training frame.
 #[derive(Clone, Debug)]
@@ -397,7 +398,8 @@ impl Trainer {
             .iter()
             .map(|&f| self.data.frames[f].skinning.clone())
             .collect();
-        let posed = lbs(&w, &skinning_tensor(&mats, &Device::Cpu)?, &self.rest)?;
+        let skinning = skinning_tensor(&mats, &Device::Cpu)?;
+        let posed = lbs(&w, &skinning, &self.rest)?;
         let posed_values = posed.to_vec3::<f32>()?;
         let mut boundary = Vec::new();
         let mut contour = Vec::new();
@@ -426,7 +428,22 @@ impl Trainer {
         let sb = mean(boundary)?;
         let sc = mean(contour)?;
         let v = self.data.template.vertex_count() as f64;
-        let lap = (self.laplacian.loss(&posed)? / (b as f64 * v))?;
+        let lap_input = match self.config.laplacian_reference {
+            LaplacianReference::Absolute => posed.clone(),
+            LaplacianReference::InitialSkinning => {
+                // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
+                let j = self.data.skeleton.len();
+                let init = Tensor::from_vec(
+                    self.data.init_weights.clone(),
+                    (1, self.data.template.vertex_count(), j),
+                    &Device::Cpu,
+                )?
+                .broadcast_as((b, self.data.template.vertex_count(), j))?
+                .contiguous()?;
+                (&posed - lbs(&init, &skinning, &self.rest)?)?
+            }
+        };
+        let lap = (self.laplacian.loss(&lap_input)? / (b as f64 * v))?;
         let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
         let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
         let lw = self.config.weights;

@@ -84,7 +84,8 @@ fn coverage_and_boundary_of_a_projected_grid() {
     assert!(cover2.iter().filter(|&&c| c).count() < 40 * 40);
 }
 
-/// Independent reference of Eq. 10 by brute force over contour pixels.
+/// Independent reference of Eq. 10 by brute force over contour pixels (each pulls the nearest
+/// projected boundary vertex).
 fn brute_terms(mask: &[bool], w: usize, uv: &[[f32; 2]], boundary: &[u32]) -> (f64, f64) {
     let c = crate::distance_transform::mask_contour(w, mask.len() / w, mask).unwrap();
     let centres: Vec<[f64; 2]> = (0..c.len())
@@ -113,8 +114,9 @@ fn brute_terms(mask: &[bool], w: usize, uv: &[[f32; 2]], boundary: &[u32]) -> (f
     let t2 = centres
         .iter()
         .map(|&p| {
-            uv.iter()
-                .map(|q| dist(p, q.map(f64::from)))
+            boundary
+                .iter()
+                .map(|&i| dist(p, uv[i as usize].map(f64::from)))
                 .fold(f64::INFINITY, f64::min)
         })
         .sum();
