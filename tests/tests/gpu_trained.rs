@@ -39,10 +39,15 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
     let capture = load_capture(dir.path()).unwrap();
     let initial = initial_weights(&capture).unwrap();
     let data = train_data(&capture, &initial, &DataOptions::default()).unwrap();
+    // A high learning rate so that a few iterations leave the near-uniform initialisation.
     let config = TrainConfig {
-        warm_start_iterations: 15,
+        warm_start_iterations: 20,
         iterations: 5,
         batch: 2,
+        adam: skinfield_trainer::optim::AdamConfig {
+            lr: 1e-2,
+            ..Default::default()
+        },
         ..TrainConfig::default()
     };
     let (warm, image) = (config.warm_start_iterations, config.iterations);

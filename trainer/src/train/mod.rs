@@ -333,7 +333,12 @@ impl Trainer {
     fn sample(&self, phase: u64, iteration: u64) -> Vec<usize> {
         let mut rng = frame_rng(self.config.seed, phase, iteration);
         let n = self.data.frames.len();
-        (0..self.config.batch)
+        let batch = if phase == 1 {
+            self.config.warm_start_batch
+        } else {
+            self.config.batch
+        };
+        (0..batch)
             .map(|_| rng.random_range(0..n))
             .collect()
     }
