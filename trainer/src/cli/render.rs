@@ -1,5 +1,6 @@
 //! `trainer render`: pictures of a posed mesh — over a captured image (`--kind overlay`, paper
-//! Fig. 3) or coloured by per-vertex M2S error (`--kind error`, paper Fig. 5) — as PNG.
+//! Fig. 3), coloured by per-vertex M2S error (`--kind error`, paper Fig. 5), or by the learned
+//! appearance (`--kind albedo|shading|appearance`, from the nets stored in the `.skf`) — as PNG.
 
 use std::path::PathBuf;
 
@@ -7,6 +8,9 @@ use anyhow::Context;
 use clap::{Args as ClapArgs, ValueEnum};
 use glam::Vec3;
 use skinfield_formats::capture::{load_capture, write_image_png};
+use skinfield_formats::pose_features;
+use skinfield_formats::skf::{SkfView, read_skf_file};
+use skinfield_trainer::appearance::{Appearance, AppearanceKind, appearance_image};
 use skinfield_trainer::eval::render::{error_image, overlay};
 use skinfield_trainer::eval::{PreparedSkinning, Skinning, per_vertex_m2s};
 
@@ -17,6 +21,12 @@ pub enum Kind {
     Overlay,
     /// The posed mesh coloured by per-vertex distance to the ground truth (test frames only).
     Error,
+    /// The learned albedo (needs `--weights skf:FILE` with the appearance nets).
+    Albedo,
+    /// ShadowNet's shading multiplier, as grey (same file).
+    Shading,
+    /// Albedo × shading, the learned appearance (same file).
+    Appearance,
 }
 
 /// Arguments of `trainer render`.
@@ -84,6 +94,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 &error,
                 args.max_error_cm / 100.0,
                 Vec3::ONE,
+            )?
+        }
+        Kind::Albedo | Kind::Shading | Kind::Appearance => {
+            let Skinning::Skf(path) = &args.weights else {
+                anyhow::bail!("--kind {:?} needs --weights skf:FILE", args.kind);
+            };
+            let bytes = read_skf_file(path)?;
+            let view = SkfView::parse(&bytes).with_context(|| path.display().to_string())?;
+            let appearance = Appearance::from_skf(&view, path)?;
+            let mut features = vec![0.0; 3 * capture.skeleton.len()];
+            pose_features(
+                &capture.skeleton,
+                &capture.poses[frame],
+                capture.up_axis,
+                &mut features,
+            )?;
+            let kind = match args.kind {
+                Kind::Albedo => AppearanceKind::Albedo,
+                Kind::Shading => AppearanceKind::Shading,
+                _ => AppearanceKind::Colour,
+            };
+            appearance_image(
+                &appearance,
+                camera,
+                &capture.template.positions,
+                &posed,
+                triangles,
+                &features,
+                kind,
+                Vec3::ZERO,
             )?
         }
     };

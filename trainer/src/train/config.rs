@@ -60,6 +60,8 @@ pub struct TrainConfig {
     pub checkpoint_every: u64,
     /// Scale of the initial output layer (small: near-uniform weights before the warm start).
     pub output_init_scale: f32,
+    /// Stages 2–4 (appearance field and rendering loss); all iterations 0 by default.
+    pub stages: super::stages::StageConfig,
 }
 
 impl Default for TrainConfig {
@@ -76,6 +78,7 @@ impl Default for TrainConfig {
             exact_diameter_limit: 4096,
             checkpoint_every: 100,
             output_init_scale: 0.1,
+            stages: super::stages::StageConfig::default(),
         }
     }
 }
@@ -159,6 +162,7 @@ impl TrainConfig {
         if !(self.output_init_scale.is_finite() && self.output_init_scale > 0.0) {
             return Err("output_init_scale");
         }
+        self.stages.validate()?;
         Ok(())
     }
 }

@@ -18,6 +18,7 @@
 pub mod config;
 pub mod data;
 pub mod plot;
+pub mod stages;
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -163,6 +164,8 @@ pub struct Trainer {
     partwise: PartwiseReg,
     warm_done: u64,
     done: u64,
+    /// Stage 4's rendering term while it runs ([`stages`]).
+    rendering: Option<stages::RenderingTerm>,
 }
 
 fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {
@@ -273,6 +276,7 @@ impl Trainer {
             partwise,
             warm_done: 0,
             done: 0,
+            rendering: None,
         })
     }
 
@@ -406,6 +410,8 @@ impl Trainer {
             (&skin * lw.skinning)?,
             (&part * lw.partwise)?,
         ];
+        let mut terms = terms.to_vec();
+        terms.extend(self.rendering_term(&frames, &posed)?);
         let total = Tensor::stack(&terms, 0)?.sum_all()?;
         let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
         self.done += 1;
