@@ -36,7 +36,6 @@ use crate::losses::lbs::{lbs, skinning_tensor};
 use crate::losses::rendering::{RgbTarget, rendering_loss, sample_visible};
 use crate::optim::Adam;
 use crate::raster::rasterize;
-use crate::skinnet::encode_positions;
 
 /// What colours the rendering loss gives the mesh in stage 4.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -184,7 +183,8 @@ impl Trainer {
         Ok(lbs(&w, &skinning_tensor(&mats, &Device::Cpu)?, &self.rest)?)
     }
 
-    /// Mean rendering loss over the views of `frames` for posed vertices `[B, V, 3]`.
+    /// Mean rendering loss over the views of `frames` for posed vertices `[B, V, 3]`, samples
+    /// drawn from the stream `(phase, iteration)`.
     fn rendering_mean(
         &self,
         images: &[Vec<RgbTarget>],
@@ -192,8 +192,7 @@ impl Trainer {
         posed: &Tensor,
         colouring: Colouring,
         config: &StageConfig,
-        phase: u64,
-        iteration: u64,
+        (phase, iteration): (u64, u64),
     ) -> Result<Tensor, TrainError> {
         let mut rng = frame_rng(self.config.seed, phase, iteration);
         let encoded = self.encoded()?;
@@ -292,8 +291,7 @@ impl Trainer {
             posed,
             colouring,
             &term.config,
-            PHASE_REFINE,
-            self.done,
+            (PHASE_REFINE, self.done),
         );
         let out = result.and_then(|l| {
             term.last = f64::from(l.to_vec0::<f32>()?);
@@ -444,7 +442,7 @@ impl Trainer {
                     Colouring::Shadow(&appearance)
                 };
                 let loss =
-                    self.rendering_mean(&images, &frames, &posed, colouring, &config, phase, it)?;
+                    self.rendering_mean(&images, &frames, &posed, colouring, &config, (phase, it))?;
                 let value = f64::from(loss.to_vec0::<f32>()?);
                 writeln!(csv, "{stage},{},{value:.6e},{value:.6e}", it + 1).map_err(io)?;
                 optimiser.backward_step(&loss)?;

@@ -1,6 +1,7 @@
 use glam::Vec3;
 
 use super::*;
+use crate::skinnet::encode_positions;
 use crate::train::tests::{config, scene};
 use crate::train::{TrainConfig, TrainData};
 
