@@ -11,20 +11,20 @@
 //!
 //! Each net has its own [`VarMap`] so that the training stages can optimise one while the other
 //! is frozen. The nets are stored in the `.skf` beside SkinNet (the format reserves
-//! [`Net::Albedo`] and [`Net::Shadow`]); [`Appearance::from_skf`] loads them back.
+//! [`Net::Albedo`] and [`Net::Shadow`]); [`Appearance::from_skf`] loads them back, and
+//! [`appearance_image`] draws them for `trainer render`.
 
 use std::path::{Path, PathBuf};
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use glam::Vec3;
+use skinfield_formats::Camera;
+use skinfield_formats::mesh::area_weighted_normals;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 
+use crate::raster::rasterize;
 use crate::skinnet::{WnLinear, encode_positions, init_net_varmap, softplus};
-
-pub mod render;
-
-pub use render::{AppearanceKind, appearance_image};
 
 /// A weight-normalised MLP of the file's architecture for [`Net::Albedo`] or [`Net::Shadow`].
 #[derive(Clone, Debug)]
@@ -387,6 +387,51 @@ pub fn shadow_input(
         .collect();
     let nd = Tensor::from_vec(nd, (n, 6), dev)?.to_dtype(dt)?;
     Tensor::cat(&[encoded, &pose, &nd], 1)
+}
+
+/// Which appearance quantity a picture shows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AppearanceKind {
+    /// `clip(a)`.
+    Albedo,
+    /// `clip(r)` as grey.
+    Shading,
+    /// `clip(a · r)`.
+    Colour,
+}
+
+/// A picture of the learned appearance: the posed mesh coloured per vertex by `kind` (clipped,
+/// as at inference), interpolated over the visible triangles without further lighting (the
+/// shading is what ShadowNet learned). Renders `posed` (the template posed for one frame; `canonical` its rest positions, same
+/// order) seen by `camera`, coloured by `kind`; `background` where nothing is visible.
+#[allow(clippy::too_many_arguments)]
+pub fn appearance_image(
+    appearance: &Appearance,
+    camera: &Camera,
+    canonical: &[Vec3],
+    posed: &[Vec3],
+    triangles: &[[u32; 3]],
+    pose_features: &[f32],
+    kind: AppearanceKind,
+    background: Vec3,
+) -> candle_core::Result<Vec<Vec3>> {
+    let normals: Vec<Vec3> = area_weighted_normals(posed, triangles)
+        .into_iter()
+        .map(|n| n.normalize_or(Vec3::Y))
+        .collect();
+    let c =
+        appearance.colours_clipped(canonical, pose_features, posed, &normals, camera.center())?;
+    let per_vertex = match kind {
+        AppearanceKind::Albedo => c.albedo,
+        AppearanceKind::Shading => c.shading,
+        AppearanceKind::Colour => c.colour,
+    };
+    let frags = rasterize(camera, posed, triangles);
+    Ok(frags
+        .interpolate(triangles, &per_vertex)
+        .into_iter()
+        .map(|p| p.unwrap_or(background))
+        .collect())
 }
 
 #[cfg(test)]
