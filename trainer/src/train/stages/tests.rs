@@ -193,3 +193,26 @@ fn fixed_colours_come_from_the_images_and_mismatched_images_are_rejected() {
         Err(TrainError::Data(_))
     ));
 }
+
+#[test]
+fn stage_config_reads_from_json_and_names_bad_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("c.json");
+    std::fs::write(
+        &p,
+        r#"{"stages": {"albedo_iterations": 5, "colours": "albedo_only"}}"#,
+    )
+    .unwrap();
+    let c = TrainConfig::load(&p).unwrap();
+    assert_eq!(c.stages.albedo_iterations, 5);
+    assert_eq!(c.stages.colours, ColourSource::AlbedoOnly);
+    assert!(c.stages.any() && !TrainConfig::default().stages.any());
+    std::fs::write(&p, r#"{"stages": {"rendering_weight": -1}}"#).unwrap();
+    assert!(matches!(
+        TrainConfig::load(&p),
+        Err(crate::train::ConfigError::Field {
+            field: "stages.rendering_weight",
+            ..
+        })
+    ));
+}
