@@ -1,6 +1,7 @@
 //! Skinfield trainer: bone-heat initial weights, synthetic captures, SkinNet training with
 //! candle, export to `.skf`, and evaluation against ground truth.
 
+pub mod appearance;
 pub mod distance_transform;
 pub mod eval;
 pub mod geodesic;

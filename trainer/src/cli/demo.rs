@@ -43,6 +43,9 @@ pub struct Args {
     /// Hide the progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// The ablation table (paper Table 2) instead of the plain demo.
+    #[command(flatten)]
+    pub ablation: super::ablations::AblationArgs,
 }
 
 /// Runs `trainer demo`.
@@ -87,6 +90,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         train_vertices: args.train_vertices,
         ..DataOptions::default()
     };
+    if args.ablation.ablations {
+        let ablation_out = out.join("ablations");
+        super::ablations::run(
+            &args.ablation,
+            &capture,
+            &initial,
+            config,
+            args.train_vertices,
+            &ablation_out,
+            !args.quiet,
+        )?;
+        println!("total {:.1} s", total.elapsed().as_secs_f64());
+        return Ok(());
+    }
     let t = Instant::now();
     let skin_work = out.join("train-skinnet");
     let loop_s = train_skinnet(

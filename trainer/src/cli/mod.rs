@@ -1,5 +1,6 @@
 //! One module per `trainer` subcommand: its clap `Args` and a `run(args) -> anyhow::Result<()>`.
 
+pub mod ablations;
 pub mod demo;
 pub mod eval;
 pub mod heat;

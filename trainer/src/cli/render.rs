@@ -1,7 +1,8 @@
 //! `trainer render`: pictures of a posed mesh — over a captured image (`--kind overlay`, paper
-//! Fig. 3) or coloured by per-vertex M2S error (`--kind error`, paper Fig. 5) — as PNG. With
-//! several `--template` files (e.g. from `trainer resample`) the pictures of each, posed in the
-//! same frame, are put side by side in one PNG.
+//! Fig. 3), coloured by per-vertex M2S error (`--kind error`, paper Fig. 5), or by the learned
+//! appearance (`--kind albedo|shading|appearance`, from the nets stored in the `.skf`) — as PNG.
+//! With several `--template` files (e.g. from `trainer resample`) the pictures of each, posed in
+//! the same frame, are put side by side in one PNG.
 
 use std::path::PathBuf;
 
@@ -10,6 +11,9 @@ use clap::{Args as ClapArgs, ValueEnum};
 use glam::Vec3;
 use skinfield_formats::Template;
 use skinfield_formats::capture::{load_capture, write_image_png};
+use skinfield_formats::pose_features;
+use skinfield_formats::skf::{SkfView, read_skf_file};
+use skinfield_trainer::appearance::{Appearance, AppearanceKind, appearance_image};
 use skinfield_trainer::eval::render::{error_image, overlay};
 use skinfield_trainer::eval::{PreparedSkinning, Skinning, load_template, per_vertex_m2s};
 
@@ -20,6 +24,12 @@ pub enum Kind {
     Overlay,
     /// The posed mesh coloured by per-vertex distance to the ground truth (test frames only).
     Error,
+    /// The learned albedo (needs `--weights skf:FILE` with the appearance nets).
+    Albedo,
+    /// ShadowNet's shading multiplier, as grey (same file).
+    Shading,
+    /// Albedo × shading, the learned appearance (same file).
+    Appearance,
 }
 
 /// Arguments of `trainer render`.
@@ -126,6 +136,36 @@ fn panel(
                 &error,
                 args.max_error_cm / 100.0,
                 Vec3::ONE,
+            )?
+        }
+        Kind::Albedo | Kind::Shading | Kind::Appearance => {
+            let Skinning::Skf(path) = &args.weights else {
+                anyhow::bail!("--kind {:?} needs --weights skf:FILE", args.kind);
+            };
+            let bytes = read_skf_file(path)?;
+            let view = SkfView::parse(&bytes).with_context(|| path.display().to_string())?;
+            let appearance = Appearance::from_skf(&view, path)?;
+            let mut features = vec![0.0; 3 * capture.skeleton.len()];
+            pose_features(
+                &capture.skeleton,
+                &capture.poses[frame],
+                capture.up_axis,
+                &mut features,
+            )?;
+            let kind = match args.kind {
+                Kind::Albedo => AppearanceKind::Albedo,
+                Kind::Shading => AppearanceKind::Shading,
+                _ => AppearanceKind::Colour,
+            };
+            appearance_image(
+                &appearance,
+                camera,
+                &template.positions,
+                &posed,
+                triangles,
+                &features,
+                kind,
+                Vec3::ZERO,
             )?
         }
     })

@@ -1,4 +1,5 @@
-//! `trainer train`: stage 1 (SkinNet from silhouettes) or the static-weights baseline.
+//! `trainer train`: SkinNet (stage 1 from silhouettes, then stages 2–4 with the appearance field
+//! and the rendering loss when the configuration asks for them) or the static-weights baseline.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -8,8 +9,9 @@ use clap::Parser;
 use skinfield_formats::StaticSkin;
 use skinfield_formats::capture::{Capture, load_capture};
 use skinfield_trainer::eval::static_weights::write_static_weights;
-use skinfield_trainer::skinnet::export::write_skf;
+use skinfield_trainer::skinnet::export::to_skf_model;
 use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
+use skinfield_trainer::train::stages::{ColourSource, load_images};
 use skinfield_trainer::train::{TrainConfig, Trainer};
 
 /// Arguments of `trainer train`.
@@ -99,8 +101,9 @@ pub fn default_work_dir(out: &Path) -> PathBuf {
     out.with_file_name(name)
 }
 
-/// Trains SkinNet on the capture's training frames and writes the `.skf`; returns the seconds
-/// spent in the optimisation loop.
+/// Trains SkinNet on the capture's training frames (stages 2–4 too when `config.stages` has
+/// iterations) and writes the `.skf` (with the appearance nets after stages 2–4); returns the
+/// seconds spent in the optimisation loops.
 #[allow(clippy::too_many_arguments)]
 pub fn train_skinnet(
     capture: &Capture,
@@ -120,9 +123,21 @@ pub fn train_skinnet(
     }
     let start = Instant::now();
     trainer.run(work, progress)?;
+    let stages = trainer.config().stages;
+    let appearance = if stages.any() {
+        let images = load_images(capture, options)?;
+        Some(trainer.run_stages(images, work, progress)?)
+    } else {
+        None
+    };
     let seconds = start.elapsed().as_secs_f64();
     let net = trainer.net().context("the trainer holds no network")?;
-    write_skf(net, &skeleton, out)?;
+    let mut model = to_skf_model(net, &skeleton)?;
+    // Fixed vertex colours leave the nets untrained: storing them would show noise in a viewer.
+    if let Some(a) = appearance.filter(|_| stages.colours != ColourSource::FixedVertexColours) {
+        a.push_to_skf(&mut model)?;
+    }
+    model.write(out)?;
     Ok(seconds)
 }
 

@@ -9,6 +9,7 @@ pub mod laplacian;
 pub mod lbs;
 pub mod partwise;
 pub mod projection;
+pub mod rendering;
 pub mod silhouette;
 pub mod skinning_reg;
 

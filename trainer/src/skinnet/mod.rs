@@ -106,44 +106,7 @@ impl SkinNet {
         out_scale: f32,
         device: &Device,
     ) -> Result<()> {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
-        let mut data = varmap
-            .data()
-            .lock()
-            .map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
-        for (i, &(out, inp)) in shapes.iter().enumerate() {
-            let bound = 1.0 / (inp as f32).sqrt();
-            let scale = if i + 1 == shapes.len() {
-                out_scale
-            } else {
-                1.0
-            };
-            let v: Vec<f32> = (0..out * inp)
-                .map(|_| scale * rng.random_range(-bound..bound))
-                .collect();
-            let g: Vec<f32> = v
-                .chunks(inp)
-                .map(|r| r.iter().map(|x| x * x).sum::<f32>().sqrt())
-                .collect();
-            let b: Vec<f32> = (0..out)
-                .map(|_| scale * rng.random_range(-bound..bound))
-                .collect();
-            let name = |p: &str| format!("{prefix}.l{i}.{p}");
-            data.insert(
-                name("v"),
-                Var::from_tensor(&Tensor::from_vec(v, (out, inp), device)?)?,
-            );
-            data.insert(
-                name("g"),
-                Var::from_tensor(&Tensor::from_vec(g, out, device)?)?,
-            );
-            data.insert(
-                name("b"),
-                Var::from_tensor(&Tensor::from_vec(b, out, device)?)?,
-            );
-        }
-        Ok(())
+        init_net_varmap(varmap, config, Net::Skin, prefix, seed, out_scale, device)
     }
 
     /// A freshly initialised SkinNet and the `VarMap` holding its parameters (f32, CPU).
@@ -243,6 +206,57 @@ impl SkinNet {
     }
 }
 
+/// [`SkinNet::init_varmap`] for any of the file's nets (the appearance nets share SkinNet's
+/// hyper-parameters, paper supplementary D): layer `i` of `net` under `{prefix}.l{i}.{v,g,b}`.
+pub fn init_net_varmap(
+    varmap: &VarMap,
+    config: &ModelConfig,
+    net: Net,
+    prefix: &str,
+    seed: u64,
+    out_scale: f32,
+    device: &Device,
+) -> Result<()> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let shapes: Vec<_> = config.layer_shapes(net).collect();
+    let mut data = varmap
+        .data()
+        .lock()
+        .map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
+    for (i, &(out, inp)) in shapes.iter().enumerate() {
+        let bound = 1.0 / (inp as f32).sqrt();
+        let scale = if i + 1 == shapes.len() {
+            out_scale
+        } else {
+            1.0
+        };
+        let v: Vec<f32> = (0..out * inp)
+            .map(|_| scale * rng.random_range(-bound..bound))
+            .collect();
+        let g: Vec<f32> = v
+            .chunks(inp)
+            .map(|r| r.iter().map(|x| x * x).sum::<f32>().sqrt())
+            .collect();
+        let b: Vec<f32> = (0..out)
+            .map(|_| scale * rng.random_range(-bound..bound))
+            .collect();
+        let name = |p: &str| format!("{prefix}.l{i}.{p}");
+        data.insert(
+            name("v"),
+            Var::from_tensor(&Tensor::from_vec(v, (out, inp), device)?)?,
+        );
+        data.insert(
+            name("g"),
+            Var::from_tensor(&Tensor::from_vec(g, out, device)?)?,
+        );
+        data.insert(
+            name("b"),
+            Var::from_tensor(&Tensor::from_vec(b, out, device)?)?,
+        );
+    }
+    Ok(())
+}
+
 /// `x̂ = 2(x̄ − bbox_min)/(bbox_max − bbox_min) − 1` for one point.
 #[must_use]
 pub fn normalise(config: &ModelConfig, x: Vec3) -> [f32; 3] {
@@ -283,4 +297,4 @@ pub fn encode_positions(config: &ModelConfig, points: &[Vec3], device: &Device) 
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

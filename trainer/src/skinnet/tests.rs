@@ -257,7 +257,8 @@ fn parameter_gradients_match_finite_differences() {
     assert_eq!(checked, 21);
 }
 
-fn skeleton(j: usize) -> Skeleton {
+/// A chain of `j` joints 0.3 m apart (shared by the appearance-net export tests).
+pub(crate) fn skeleton(j: usize) -> Skeleton {
     let names = (0..j).map(|i| format!("j{i}")).collect();
     let parents = (0..j).map(|i| i.checked_sub(1)).collect();
     let bind = (0..j)

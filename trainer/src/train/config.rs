@@ -91,6 +91,8 @@ pub struct TrainConfig {
     /// `−ln ε` logit units below the others, out of reach of Adam's ~lr-sized steps, so the
     /// baseline re-blends existing influences but does not add new ones.
     pub static_epsilon: f32,
+    /// Stages 2–4 (appearance field and rendering loss); all iterations 0 by default.
+    pub stages: super::stages::StageConfig,
 }
 
 impl Default for TrainConfig {
@@ -111,6 +113,7 @@ impl Default for TrainConfig {
             checkpoint_every: 100,
             output_init_scale: 0.1,
             static_epsilon: 1e-4,
+            stages: super::stages::StageConfig::default(),
         }
     }
 }
@@ -200,6 +203,7 @@ impl TrainConfig {
         if !(self.static_epsilon.is_finite() && self.static_epsilon > 0.0) {
             return Err("static_epsilon");
         }
+        self.stages.validate()?;
         Ok(())
     }
 }

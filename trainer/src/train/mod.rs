@@ -19,6 +19,7 @@
 pub mod config;
 pub mod data;
 pub mod plot;
+pub mod stages;
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -164,7 +165,14 @@ pub struct Trainer {
     partwise: PartwiseReg,
     warm_done: u64,
     done: u64,
+    /// Stage 4's rendering term while it runs ([`stages`]).
+    rendering: Option<stages::RenderingTerm>,
 }
+
+/// Frame-sampling stream of the warm start (its batches have `warm_start_batch` frames).
+const PHASE_WARM: u64 = 1;
+/// Frame-sampling stream of the image-loss iterations (stages 2–4 use 12–14).
+const PHASE_IMAGE: u64 = 2;
 
 fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {
     // Distinct, reproducible streams per (seed, phase, iteration).
@@ -272,6 +280,7 @@ impl Trainer {
             partwise,
             warm_done: 0,
             done: 0,
+            rendering: None,
         })
     }
 
@@ -333,7 +342,7 @@ impl Trainer {
     fn sample(&self, phase: u64, iteration: u64) -> Vec<usize> {
         let mut rng = frame_rng(self.config.seed, phase, iteration);
         let n = self.data.frames.len();
-        let batch = if phase == 1 {
+        let batch = if phase == PHASE_WARM {
             self.config.warm_start_batch
         } else {
             self.config.batch
@@ -356,7 +365,7 @@ impl Trainer {
             self.warm_done += 1;
             return Ok(0.0);
         }
-        let frames = self.sample(1, self.warm_done);
+        let frames = self.sample(PHASE_WARM, self.warm_done);
         let w = self.weights(&frames)?;
         let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
         let init = Tensor::from_vec(self.data.init_weights.clone(), (1, v, j), &Device::Cpu)?;
@@ -396,7 +405,7 @@ impl Trainer {
             ((self.done + 1) as f64 / ramp as f64).min(1.0)
         };
         self.optimiser.set_lr(self.config.adam.lr * scale);
-        let frames = self.sample(2, self.done);
+        let frames = self.sample(PHASE_IMAGE, self.done);
         let w = self.weights(&frames)?;
         let b = frames.len();
         let mats: Vec<Vec<Mat4>> = frames
@@ -459,6 +468,8 @@ impl Trainer {
             (&skin * lw.skinning)?,
             (&part * lw.partwise)?,
         ];
+        let mut terms = terms.to_vec();
+        terms.extend(self.rendering_term(&frames, &posed)?);
         let total = Tensor::stack(&terms, 0)?.sum_all()?;
         let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
         self.done += 1;

@@ -7,7 +7,7 @@ use skinfield_formats::{Pose, UpAxis, pose_features};
 /// A tube along +Y (radius 0.1, height 1), 12 around × 11 rings, and a two-bone chain with the
 /// elbow at y = 0.5. Ground truth: a smooth blend over y ∈ [0.35, 0.65]; initial weights: a hard
 /// step at y = 0.25, well below the elbow (what the training has to move away from).
-fn scene(frames: usize) -> (TrainData, Vec<f32>) {
+pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
     let (around, rings) = (12usize, 11usize);
     let mut positions = Vec::new();
     for r in 0..rings {
@@ -126,7 +126,7 @@ fn scene(frames: usize) -> (TrainData, Vec<f32>) {
     )
 }
 
-fn config() -> TrainConfig {
+pub(super) fn config() -> TrainConfig {
     TrainConfig {
         iterations: 4,
         warm_start_iterations: 2,

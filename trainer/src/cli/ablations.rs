@@ -1,0 +1,247 @@
+//! `trainer demo --ablations`: the rows of the paper's Table 2 that apply to the built-in
+//! capture, each trained and scored on the held-out test poses.
+//!
+//! Rows: initial (bone heat); static weights; w/o L_rend (stage 1, continued for as many
+//! iterations as stage 4 has, without the rendering loss, so the SkinNet budget is equal);
+//! w/ albedo only (stages 1, 2, 4); w/ fixed vertex colours (stage 1, then stage 4 with colours
+//! read from the first training frame's images); ours (stages 1–4); ours with fewer cameras
+//! (stages 1–4 on the first `--ablation-cameras` cameras). The rows with every camera share one
+//! stage-1 run (its checkpoint), so they differ only in what follows it.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args as ClapArgs;
+use skinfield_formats::StaticSkin;
+use skinfield_formats::capture::Capture;
+use skinfield_formats::skf::write_atomic;
+use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
+use skinfield_trainer::eval::{EvalOptions, Skinning, evaluate};
+use skinfield_trainer::skinnet::export::to_skf_model;
+use skinfield_trainer::train::data::{DataOptions, train_data};
+use skinfield_trainer::train::stages::{ColourSource, StageConfig, load_images};
+use skinfield_trainer::train::{TrainConfig, Trainer};
+
+use super::train::train_static;
+
+/// Options of `trainer demo --ablations`.
+#[derive(ClapArgs, Debug, Clone)]
+pub struct AblationArgs {
+    /// Produce the ablation table (paper Table 2) instead of the plain demo.
+    #[arg(long)]
+    pub ablations: bool,
+    /// Stage 2 (AlbedoNet) iterations.
+    #[arg(long, default_value_t = 100)]
+    pub albedo_iterations: u64,
+    /// Stage 3 (ShadowNet) iterations.
+    #[arg(long, default_value_t = 100)]
+    pub shadow_iterations: u64,
+    /// Stage 4 (SkinNet refined with the rendering loss) iterations.
+    #[arg(long, default_value_t = 100)]
+    pub refine_iterations: u64,
+    /// Visible pixels sampled per view and iteration.
+    #[arg(long, default_value_t = StageConfig::default().pixels_per_view)]
+    pub pixels_per_view: usize,
+    /// Views rendered per frame and iteration in the rendering loss (0 = all).
+    #[arg(long, default_value_t = 4)]
+    pub views_per_frame: usize,
+    /// Weight of the rendering loss in stage 4.
+    #[arg(long, default_value_t = StageConfig::default().rendering_weight)]
+    pub rendering_weight: f64,
+    /// Cameras of the "fewer cameras" row.
+    #[arg(long, default_value_t = 4)]
+    pub ablation_cameras: usize,
+}
+
+/// One trained variant after stage 1.
+struct Variant {
+    name: &'static str,
+    stages: StageConfig,
+    extra_stage1: u64,
+}
+
+/// Trains and scores every row; writes `out/ablations.{md,json}` and returns the rows with
+/// their training seconds.
+pub fn run(
+    args: &AblationArgs,
+    capture: &Capture,
+    initial: &StaticSkin,
+    base: TrainConfig,
+    train_vertices: usize,
+    out: &Path,
+    progress: bool,
+) -> anyhow::Result<Vec<(EvalRow, f64)>> {
+    let eval = |s: &Skinning, name: &str| -> anyhow::Result<EvalRow> {
+        let mut row = evaluate(capture, s, &EvalOptions::default())
+            .with_context(|| format!("evaluating `{name}`"))?;
+        row.method = name.to_string();
+        Ok(row)
+    };
+    let mut rows = vec![(eval(&Skinning::Initial, "initial weights")?, 0.0)];
+
+    let t = Instant::now();
+    let static_file = out.join("static_weights.json");
+    train_static(
+        capture,
+        initial,
+        base.clone(),
+        &out.join("train-static"),
+        &static_file,
+        false,
+        progress,
+    )?;
+    rows.push((
+        eval(&Skinning::Static(static_file), "static weights")?,
+        t.elapsed().as_secs_f64(),
+    ));
+
+    let full = StageConfig {
+        albedo_iterations: args.albedo_iterations,
+        shadow_iterations: args.shadow_iterations,
+        refine_iterations: args.refine_iterations,
+        pixels_per_view: args.pixels_per_view,
+        views_per_frame: args.views_per_frame,
+        rendering_weight: args.rendering_weight,
+        ..StageConfig::default()
+    };
+    let none = StageConfig {
+        albedo_iterations: 0,
+        shadow_iterations: 0,
+        refine_iterations: 0,
+        ..full
+    };
+    let variants = [
+        Variant {
+            name: "w/o L_rend",
+            stages: none,
+            extra_stage1: args.refine_iterations,
+        },
+        Variant {
+            name: "w/ albedo only",
+            stages: StageConfig {
+                shadow_iterations: 0,
+                colours: ColourSource::AlbedoOnly,
+                ..full
+            },
+            extra_stage1: 0,
+        },
+        Variant {
+            name: "w/ fixed vertex colours",
+            stages: StageConfig {
+                albedo_iterations: 0,
+                shadow_iterations: 0,
+                colours: ColourSource::FixedVertexColours,
+                ..full
+            },
+            extra_stage1: 0,
+        },
+        Variant {
+            name: "ours",
+            stages: full,
+            extra_stage1: 0,
+        },
+    ];
+
+    for cameras in [0, args.ablation_cameras] {
+        let options = DataOptions {
+            train_vertices,
+            cameras,
+        };
+        let data = train_data(capture, initial, &options)?;
+        let images = load_images(capture, &options)?;
+        let stage1_dir = out.join(format!("ablation-stage1-cams{cameras}"));
+        let t = Instant::now();
+        let mut stage1 = Trainer::new(data.clone(), base.clone(), false)?;
+        stage1.run(&stage1_dir, progress)?;
+        let stage1_s = t.elapsed().as_secs_f64();
+        println!(
+            "stage 1 ({} cameras): {stage1_s:.0} s",
+            if cameras == 0 {
+                capture.rig.cameras.len()
+            } else {
+                cameras
+            }
+        );
+        drop(stage1);
+        let list: Vec<&Variant> = if cameras == 0 {
+            variants.iter().collect()
+        } else {
+            variants.iter().filter(|v| v.name == "ours").collect()
+        };
+        for v in list {
+            let name = if cameras == 0 {
+                v.name.to_string()
+            } else {
+                format!("ours, {cameras} cameras")
+            };
+            let dir = out.join(format!("ablation-{}", name.replace(['/', ' ', ','], "_")));
+            let t = Instant::now();
+            let config = TrainConfig {
+                iterations: base.iterations + v.extra_stage1,
+                stages: v.stages,
+                ..base.clone()
+            };
+            let mut trainer = Trainer::new(data.clone(), config, false)?;
+            trainer.resume(&stage1_dir.join("checkpoint.safetensors"))?;
+            trainer.run(&dir, progress)?;
+            let appearance = if v.stages.any() {
+                Some(trainer.run_stages(images.clone(), &dir, progress)?)
+            } else {
+                None
+            };
+            let net = trainer.net().context("the trainer holds no network")?;
+            let mut model = to_skf_model(net, &capture.skeleton)?;
+            if let Some(a) =
+                appearance.filter(|_| v.stages.colours != ColourSource::FixedVertexColours)
+            {
+                a.push_to_skf(&mut model)?;
+            }
+            let path = dir.join("model.skf");
+            model.write(&path)?;
+            let seconds = stage1_s + t.elapsed().as_secs_f64();
+            let row = eval(&Skinning::Skf(path), &name)?;
+            println!(
+                "{name}: Chamfer {:.3} cm ({seconds:.0} s with stage 1)",
+                row.chamfer_cm
+            );
+            rows.push((row, seconds));
+        }
+    }
+
+    let plain: Vec<EvalRow> = rows.iter().map(|(r, _)| r.clone()).collect();
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "| method | Chamfer (cm) | M2S (cm) | S2M (cm) | frames | training (s) |"
+    );
+    let _ = writeln!(md, "| --- | --- | --- | --- | --- | --- |");
+    for (r, s) in &rows {
+        let _ = writeln!(
+            md,
+            "| {} | {:.3} | {:.3} | {:.3} | {} | {s:.0} |",
+            r.method, r.chamfer_cm, r.m2s_cm, r.s2m_cm, r.frames
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nStage 1: {} warm-start + {} iterations; stage 2: {}; stage 3: {}; stage 4: {} (λ_rend {}, {} pixels × {} views per frame per iteration); {} training vertices.",
+        base.warm_start_iterations,
+        base.iterations,
+        args.albedo_iterations,
+        args.shadow_iterations,
+        args.refine_iterations,
+        args.rendering_weight,
+        args.pixels_per_view,
+        args.views_per_frame,
+        train_vertices
+    );
+    println!("\n{}\n{md}", rows_to_table(&plain));
+    let md_path = out.join("ablations.md");
+    write_atomic(&md_path, md.as_bytes()).with_context(|| md_path.display().to_string())?;
+    let json_path = out.join("ablations.json");
+    write_atomic(&json_path, rows_to_json(&plain).as_bytes())
+        .with_context(|| json_path.display().to_string())?;
+    Ok(rows)
+}

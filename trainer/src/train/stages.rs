@@ -1,0 +1,493 @@
+//! Stages 2–4 of the paper's schedule (§3.4, supplementary F), after stage 1 ([`Trainer::run`]):
+//!
+//! 2. AlbedoNet from the rendering loss alone, SkinNet frozen (colour `c = a`: ShadowNet is not
+//!    trained yet);
+//! 3. ShadowNet from the rendering loss, SkinNet and AlbedoNet frozen (`c = a · r`);
+//! 4. SkinNet refined with every stage-1 loss plus `λ_rend · L_rend`, the appearance frozen.
+//!
+//! Every stage draws frames from the same seeded batches as stage 1 (a stream per stage and
+//! iteration). Per frame and view the posed mesh is rasterised once; `pixels_per_view` visible
+//! pixels are sampled from a generator seeded by `(seed, stage, iteration)` and, where
+//! `views_per_frame` is set, only that many seeded views of each frame are rendered. The loss per
+//! view is the mean over its samples of the L1 colour difference (summed over RGB), averaged
+//! over the views of the batch ([`crate::losses::rendering`] documents what is differentiated).
+//! ShadowNet's normal and viewing-direction inputs are constants of the step (stage 4 moves the
+//! vertices through the projected sample points only).
+//!
+//! The ablations of the paper's Table 2 are [`ColourSource`]s: without ShadowNet (stage 3
+//! skipped, `c = a` in stage 4) and with fixed per-vertex colours read from the images of the
+//! first training frame instead of the appearance field. Stages 2–4 are not checkpointed: a run
+//! that stops in them restarts them from the stage-1 checkpoint.
+
+use std::io::Write;
+use std::path::Path;
+
+use candle_core::{DType, Device, Tensor};
+use glam::Vec3;
+use rand::seq::index::sample;
+use serde::{Deserialize, Serialize};
+use skinfield_formats::capture::Capture;
+use skinfield_formats::mesh::area_weighted_normals;
+
+use super::data::{DataError, DataOptions};
+use super::{Model, TrainError, Trainer, frame_rng};
+use crate::appearance::{Appearance, shadow_input};
+use crate::losses::lbs::{lbs, skinning_tensor};
+use crate::losses::rendering::{RgbTarget, rendering_loss, sample_visible};
+use crate::optim::Adam;
+use crate::raster::rasterize;
+
+/// What colours the rendering loss gives the mesh in stage 4.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ColourSource {
+    /// AlbedoNet × ShadowNet (the paper's method).
+    #[default]
+    Field,
+    /// AlbedoNet only (stage 3 skipped).
+    AlbedoOnly,
+    /// Per-vertex colours averaged from the first training frame's images (no appearance nets).
+    FixedVertexColours,
+}
+
+/// Stages 2–4 (a [`super::TrainConfig`] field; all iterations 0 = stage 1 only).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StageConfig {
+    /// Stage 2 (AlbedoNet) iterations.
+    pub albedo_iterations: u64,
+    /// Stage 3 (ShadowNet) iterations.
+    pub shadow_iterations: u64,
+    /// Stage 4 (SkinNet refined with the rendering loss) iterations.
+    pub refine_iterations: u64,
+    /// Visible pixels sampled per view and iteration.
+    pub pixels_per_view: usize,
+    /// Views rendered per frame and iteration (0 = all).
+    pub views_per_frame: usize,
+    /// Weight of the rendering loss in stage 4 (per-sample L1 summed over RGB).
+    pub rendering_weight: f64,
+    /// Colours used by the rendering loss in stage 4.
+    pub colours: ColourSource,
+    /// Learning rate of the appearance nets (Adam otherwise as in stage 1).
+    pub appearance_lr: f64,
+}
+
+impl Default for StageConfig {
+    fn default() -> Self {
+        Self {
+            albedo_iterations: 0,
+            shadow_iterations: 0,
+            refine_iterations: 0,
+            pixels_per_view: 256,
+            views_per_frame: 0,
+            rendering_weight: 10.0,
+            colours: ColourSource::Field,
+            appearance_lr: 1e-3,
+        }
+    }
+}
+
+impl StageConfig {
+    /// True when any of stages 2–4 runs.
+    #[must_use]
+    pub fn any(&self) -> bool {
+        self.albedo_iterations + self.shadow_iterations + self.refine_iterations > 0
+    }
+
+    /// Checks ranges; returns the first bad field.
+    pub fn validate(&self) -> Result<(), &'static str> {
+        if !(self.rendering_weight.is_finite() && self.rendering_weight >= 0.0) {
+            return Err("stages.rendering_weight");
+        }
+        if !(self.appearance_lr.is_finite() && self.appearance_lr > 0.0) {
+            return Err("stages.appearance_lr");
+        }
+        Ok(())
+    }
+}
+
+/// The colour images of the training frames, `[frame][view]` in [`super::data::train_data`]'s
+/// order (the capture's training frames, its first `options.cameras` cameras).
+pub fn load_images(
+    capture: &Capture,
+    options: &DataOptions,
+) -> Result<Vec<Vec<RgbTarget>>, DataError> {
+    let cameras = match options.cameras {
+        0 => capture.rig.cameras.len(),
+        c => c.min(capture.rig.cameras.len()),
+    };
+    capture
+        .train_frames
+        .iter()
+        .map(|&f| {
+            (0..cameras)
+                .map(|c| {
+                    let img = capture.load_image(c, f)?;
+                    RgbTarget::new(img.width as usize, img.height as usize, &img.rgb).map_err(|e| {
+                        DataError::Inconsistent(format!(
+                            "{}: {e}",
+                            capture.image_path(c, f).display()
+                        ))
+                    })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// How corner colours are produced in one rendering-loss evaluation.
+#[derive(Clone, Copy)]
+enum Colouring<'a> {
+    /// `a`, trainable (stage 2).
+    Albedo(&'a Appearance),
+    /// `a.detach() · r`, `r` trainable (stage 3).
+    Shadow(&'a Appearance),
+    /// Everything frozen (stage 4): the field (`true`) or the albedo alone (`false`).
+    Frozen(&'a Appearance, bool),
+    /// Fixed per-vertex colours `[V, 3]`.
+    Fixed(&'a Tensor),
+}
+
+/// The stage-4 rendering term held by the [`Trainer`] while it refines SkinNet.
+pub(crate) struct RenderingTerm {
+    images: Vec<Vec<RgbTarget>>,
+    appearance: Appearance,
+    fixed: Option<Tensor>,
+    config: StageConfig,
+    /// Unweighted value of the last evaluation.
+    last: f64,
+}
+
+/// Stage identifiers for the seeded streams (stage 1 uses phases 1 and 2).
+const PHASE_ALBEDO: u64 = 12;
+const PHASE_SHADOW: u64 = 13;
+const PHASE_REFINE: u64 = 14;
+
+impl Trainer {
+    fn encoded(&self) -> Result<&Tensor, TrainError> {
+        match &self.model {
+            Model::Net { encoded, .. } => Ok(encoded),
+            Model::Static { .. } => Err(TrainError::Data(
+                "stages 2–4 need SkinNet, not the static baseline".into(),
+            )),
+        }
+    }
+
+    /// Posed training vertices `[B, V, 3]` of `frames`.
+    fn posed(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
+        let w = self.weights(frames)?;
+        let mats: Vec<_> = frames
+            .iter()
+            .map(|&f| self.data.frames[f].skinning.clone())
+            .collect();
+        Ok(lbs(&w, &skinning_tensor(&mats, &Device::Cpu)?, &self.rest)?)
+    }
+
+    /// Mean rendering loss over the views of `frames` for posed vertices `[B, V, 3]`, samples
+    /// drawn from the stream `(phase, iteration)`.
+    fn rendering_mean(
+        &self,
+        images: &[Vec<RgbTarget>],
+        frames: &[usize],
+        posed: &Tensor,
+        colouring: Colouring,
+        config: &StageConfig,
+        (phase, iteration): (u64, u64),
+    ) -> Result<Tensor, TrainError> {
+        let mut rng = frame_rng(self.config.seed, phase, iteration);
+        let encoded = self.encoded()?;
+        let triangles = &self.data.template.triangles;
+        let albedo_all = match colouring {
+            Colouring::Albedo(a) => Some(a.albedo(encoded)?),
+            Colouring::Shadow(a) | Colouring::Frozen(a, _) => Some(a.albedo(encoded)?.detach()),
+            Colouring::Fixed(_) => None,
+        };
+        let posed_values = posed.to_vec3::<f32>()?;
+        let mut terms = Vec::new();
+        for (k, &f) in frames.iter().enumerate() {
+            let frame = &self.data.frames[f];
+            let pts: Vec<Vec3> = posed_values[k]
+                .iter()
+                .map(|p| Vec3::from_slice(p))
+                .collect();
+            let normals: Vec<Vec3> = area_weighted_normals(&pts, triangles)
+                .into_iter()
+                .map(|n| n.normalize_or(Vec3::Y))
+                .collect();
+            let xk = posed.get(k)?;
+            let n_views = frame.views.len().min(images[f].len());
+            let views: Vec<usize> = match config.views_per_frame {
+                0 => (0..n_views).collect(),
+                m if m >= n_views => (0..n_views).collect(),
+                m => sample(&mut rng, n_views, m).into_vec(),
+            };
+            for c in views {
+                let camera = &frame.views[c].camera;
+                let frags = rasterize(camera, &pts, triangles);
+                let s = sample_visible(&frags, triangles, config.pixels_per_view, &mut rng);
+                if s.is_empty() {
+                    continue;
+                }
+                let idx = Tensor::from_slice(&s.corners, s.corners.len(), &Device::Cpu)?;
+                let shade = |a: &Appearance| -> Result<Tensor, TrainError> {
+                    let eye = camera.center();
+                    let corner_n: Vec<Vec3> =
+                        s.corners.iter().map(|&v| normals[v as usize]).collect();
+                    let dirs: Vec<Vec3> = s
+                        .corners
+                        .iter()
+                        .map(|&v| (pts[v as usize] - eye).normalize_or_zero())
+                        .collect();
+                    let input = shadow_input(
+                        &encoded.index_select(&idx, 0)?,
+                        &frame.pose_features,
+                        &corner_n,
+                        &dirs,
+                    )?;
+                    Ok(a.shading(&input)?)
+                };
+                let albedo = |t: &Option<Tensor>| -> Result<Tensor, TrainError> {
+                    match t {
+                        Some(t) => Ok(t.index_select(&idx, 0)?),
+                        None => Err(TrainError::Data("no albedo".into())),
+                    }
+                };
+                let colours = match colouring {
+                    Colouring::Albedo(_) | Colouring::Frozen(_, false) => albedo(&albedo_all)?,
+                    Colouring::Shadow(a) => albedo(&albedo_all)?.broadcast_mul(&shade(a)?)?,
+                    Colouring::Frozen(a, true) => {
+                        albedo(&albedo_all)?.broadcast_mul(&shade(a)?.detach())?
+                    }
+                    Colouring::Fixed(t) => t.index_select(&idx, 0)?,
+                };
+                let l = rendering_loss(camera, &images[f][c], &s, &xk, &colours)?;
+                terms.push((l / s.len() as f64)?);
+            }
+        }
+        Ok(if terms.is_empty() {
+            Tensor::zeros((), DType::F32, &Device::Cpu)?
+        } else {
+            (Tensor::stack(&terms, 0)?.sum_all()? / terms.len() as f64)?
+        })
+    }
+
+    /// The stage-4 term for [`Trainer::step`]: `λ_rend · L_rend` on the step's posed vertices
+    /// (`None` outside stage 4).
+    pub(super) fn rendering_term(
+        &mut self,
+        frames: &[usize],
+        posed: &Tensor,
+    ) -> Result<Option<Tensor>, TrainError> {
+        let Some(mut term) = self.rendering.take() else {
+            return Ok(None);
+        };
+        let colouring = match (&term.fixed, term.config.colours) {
+            (Some(t), _) => Colouring::Fixed(t),
+            (None, c) => Colouring::Frozen(&term.appearance, c == ColourSource::Field),
+        };
+        let result = self.rendering_mean(
+            &term.images,
+            frames,
+            posed,
+            colouring,
+            &term.config,
+            (PHASE_REFINE, self.done),
+        );
+        let out = result.and_then(|l| {
+            term.last = f64::from(l.to_vec0::<f32>()?);
+            Ok((l * term.config.rendering_weight)?)
+        });
+        self.rendering = Some(term);
+        out.map(Some)
+    }
+
+    /// Per-vertex colours of the training template from the images of training frame 0: every
+    /// visible pixel adds its colour to its triangle's corners with barycentric weights, over
+    /// all views; unseen vertices get the mean colour. Shading is baked in, as in a texture
+    /// reconstructed from the capture (the paper's "NeuS texture" ablation).
+    pub fn canonical_vertex_colours(
+        &self,
+        images: &[Vec<RgbTarget>],
+    ) -> Result<Vec<Vec3>, TrainError> {
+        let posed = self.posed(&[0])?.get(0)?.to_vec2::<f32>()?;
+        let pts: Vec<Vec3> = posed.iter().map(|p| Vec3::from_slice(p)).collect();
+        let triangles = &self.data.template.triangles;
+        let mut sum = vec![Vec3::ZERO; pts.len()];
+        let mut weight = vec![0f32; pts.len()];
+        for (view, image) in self.data.frames[0].views.iter().zip(&images[0]) {
+            let frags = rasterize(&view.camera, &pts, triangles);
+            let all = sample_visible(&frags, triangles, 0, &mut frame_rng(0, 0, 0));
+            let uv = (0..all.len()).map(|k| {
+                let p = all.pixels[k] as usize;
+                [
+                    (p % image.width()) as f32 + 0.5,
+                    (p / image.width()) as f32 + 0.5,
+                ]
+            });
+            let uv: Vec<f32> = uv.flatten().collect();
+            let rgb = image
+                .sample(&Tensor::from_vec(uv, (all.len(), 2), &Device::Cpu)?)?
+                .to_vec2::<f32>()?;
+            for (k, c) in rgb.iter().enumerate() {
+                for m in 0..3 {
+                    let v = all.corners[3 * k + m] as usize;
+                    sum[v] += Vec3::from_slice(c) * all.bary[k][m];
+                    weight[v] += all.bary[k][m];
+                }
+            }
+        }
+        let seen: Vec<Vec3> = (0..pts.len())
+            .filter(|&v| weight[v] > 0.0)
+            .map(|v| sum[v] / weight[v])
+            .collect();
+        let mean = seen.iter().copied().sum::<Vec3>() / seen.len().max(1) as f32;
+        Ok((0..pts.len())
+            .map(|v| {
+                if weight[v] > 0.0 {
+                    sum[v] / weight[v]
+                } else {
+                    mean
+                }
+            })
+            .collect())
+    }
+
+    /// Runs stages 2–4 of `config.stages` after stage 1 on the training frames' colour `images`
+    /// ([`load_images`]), appending `stage,iteration,rendering,total` rows to `dir/stages.csv`.
+    /// Returns the appearance nets (untrained where their stage did not run).
+    pub fn run_stages(
+        &mut self,
+        images: Vec<Vec<RgbTarget>>,
+        dir: &Path,
+        progress: bool,
+    ) -> Result<Appearance, TrainError> {
+        let config = self.config.stages;
+        if images.len() != self.data.frames.len()
+            || images
+                .iter()
+                .zip(&self.data.frames)
+                .any(|(i, f)| i.len() != f.views.len())
+        {
+            return Err(TrainError::Data(
+                "colour images do not match the training frames and views".into(),
+            ));
+        }
+        let net_config = *self
+            .net()
+            .ok_or_else(|| TrainError::Data("stages 2–4 need SkinNet".into()))?
+            .config();
+        let appearance =
+            Appearance::seeded(net_config, self.config.seed, self.config.output_init_scale)?;
+        let io = |source: std::io::Error| TrainError::Io {
+            path: dir.join("stages.csv"),
+            source,
+        };
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let mut csv = std::fs::File::create(dir.join("stages.csv")).map_err(io)?;
+        writeln!(csv, "stage,iteration,rendering,total").map_err(io)?;
+        let bar = |n: u64, name: &str| {
+            let b = if progress {
+                indicatif::ProgressBar::new(n)
+            } else {
+                indicatif::ProgressBar::hidden()
+            };
+            b.set_prefix(name.to_string());
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{prefix} {bar:30} {pos}/{len} {elapsed_precise} {msg}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            b
+        };
+        let adam = crate::optim::AdamConfig {
+            lr: config.appearance_lr,
+            ..self.config.adam
+        };
+        let use_shadow = config.colours == ColourSource::Field;
+        let use_nets = config.colours != ColourSource::FixedVertexColours;
+        for (stage, iterations, phase) in [
+            (
+                2u64,
+                if use_nets {
+                    config.albedo_iterations
+                } else {
+                    0
+                },
+                PHASE_ALBEDO,
+            ),
+            (
+                3,
+                if use_shadow {
+                    config.shadow_iterations
+                } else {
+                    0
+                },
+                PHASE_SHADOW,
+            ),
+        ] {
+            let vars = if stage == 2 {
+                appearance.albedo_vars()
+            } else {
+                appearance.shadow_vars()
+            };
+            let mut optimiser = Adam::from_varmap(vars, adam)?;
+            let b = bar(iterations, if stage == 2 { "albedo" } else { "shadow" });
+            for it in 0..iterations {
+                let frames = self.sample(phase, it);
+                let posed = self.posed(&frames)?.detach();
+                let colouring = if stage == 2 {
+                    Colouring::Albedo(&appearance)
+                } else {
+                    Colouring::Shadow(&appearance)
+                };
+                let loss =
+                    self.rendering_mean(&images, &frames, &posed, colouring, &config, (phase, it))?;
+                let value = f64::from(loss.to_vec0::<f32>()?);
+                writeln!(csv, "{stage},{},{value:.6e},{value:.6e}", it + 1).map_err(io)?;
+                optimiser.backward_step(&loss)?;
+                b.set_message(format!("L_rend {value:.4}"));
+                b.inc(1);
+            }
+            b.finish();
+        }
+        if config.refine_iterations > 0 {
+            let fixed = if use_nets {
+                None
+            } else {
+                let c = self.canonical_vertex_colours(&images)?;
+                let flat: Vec<f32> = c.iter().flat_map(|v| v.to_array()).collect();
+                Some(Tensor::from_vec(flat, (c.len(), 3), &Device::Cpu)?)
+            };
+            self.rendering = Some(RenderingTerm {
+                images,
+                appearance: appearance.clone(),
+                fixed,
+                config,
+                last: 0.0,
+            });
+            let b = bar(config.refine_iterations, "refine");
+            let result = (|| -> Result<(), TrainError> {
+                for _ in 0..config.refine_iterations {
+                    let r = self.step()?;
+                    let l = self.rendering.as_ref().map_or(0.0, |t| t.last);
+                    writeln!(csv, "4,{},{l:.6e},{:.6e}", r.iteration, r.total).map_err(io)?;
+                    b.set_message(format!(
+                        "total {:.3} sil {:.2}/{:.2}px L_rend {l:.4}",
+                        r.total, r.silhouette_boundary, r.silhouette_contour
+                    ));
+                    b.inc(1);
+                }
+                Ok(())
+            })();
+            self.rendering = None;
+            result?;
+            b.finish();
+        }
+        csv.flush().map_err(io)?;
+        Ok(appearance)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,218 @@
+use glam::Vec3;
+
+use super::*;
+use crate::skinnet::encode_positions;
+use crate::train::tests::{config, scene};
+use crate::train::{TrainConfig, TrainData};
+
+/// Albedo of the tube: bands along its length and around it (smooth, so images have gradients).
+fn albedo(p: Vec3) -> Vec3 {
+    Vec3::new(
+        0.5 + 0.3 * (9.0 * p.y).sin(),
+        0.5 + 0.3 * (2.0 * p.z.atan2(p.x)).cos(),
+        0.4,
+    )
+}
+
+/// Images of the tube posed with the *truth* weights (as in `scene`), coloured by [`albedo`]
+/// of the canonical point seen at each pixel; grey background.
+fn images(data: &TrainData, truth: &[f32], grey: Option<f32>) -> Vec<Vec<RgbTarget>> {
+    let t = &data.template;
+    data.frames
+        .iter()
+        .map(|f| {
+            let posed: Vec<Vec3> = t
+                .positions
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    (f.skinning[0] * p.extend(1.0) * truth[2 * i]
+                        + f.skinning[1] * p.extend(1.0) * truth[2 * i + 1])
+                        .truncate()
+                })
+                .collect();
+            f.views
+                .iter()
+                .map(|v| {
+                    let frags = rasterize(&v.camera, &posed, &t.triangles);
+                    let canon = frags.interpolate(&t.triangles, &t.positions);
+                    let rgb: Vec<Vec3> = canon
+                        .iter()
+                        .map(|c| match (c, grey) {
+                            (Some(_), Some(g)) => Vec3::splat(g),
+                            (Some(c), None) => albedo(*c),
+                            (None, _) => Vec3::splat(0.5),
+                        })
+                        .collect();
+                    RgbTarget::new(v.camera.width as usize, v.camera.height as usize, &rgb).unwrap()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn stage_config(albedo: u64, shadow: u64, refine: u64) -> TrainConfig {
+    TrainConfig {
+        stages: StageConfig {
+            albedo_iterations: albedo,
+            shadow_iterations: shadow,
+            refine_iterations: refine,
+            pixels_per_view: 200,
+            appearance_lr: 3e-3,
+            ..StageConfig::default()
+        },
+        ..config()
+    }
+}
+
+fn rows(dir: &Path, stage: &str) -> Vec<(f64, f64)> {
+    std::fs::read_to_string(dir.join("stages.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .filter(|l| l.starts_with(stage))
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            (v[2], v[3])
+        })
+        .collect()
+}
+
+#[test]
+fn albedo_stage_learns_the_texture_and_runs_are_deterministic() {
+    let (data, truth) = scene(3);
+    let imgs = images(&data, &truth, None);
+    let dir = tempfile::tempdir().unwrap();
+    let mut a = Trainer::new(data.clone(), stage_config(40, 0, 0), false).unwrap();
+    a.run(&dir.path().join("a"), false).unwrap();
+    let app = a
+        .run_stages(imgs.clone(), &dir.path().join("a"), false)
+        .unwrap();
+    let r = rows(&dir.path().join("a"), "2,");
+    assert_eq!(r.len(), 40);
+    let first: f64 = r[..5].iter().map(|x| x.0).sum::<f64>() / 5.0;
+    let last: f64 = r[35..].iter().map(|x| x.0).sum::<f64>() / 5.0;
+    assert!(last < 0.5 * first, "L_rend {first} → {last}");
+    // The learned albedo approaches the texture on the template (independent of the images).
+    let t = &a.data.template;
+    let enc = encode_positions(app.config(), &t.positions, &Device::Cpu).unwrap();
+    let learned = app.albedo(&enc).unwrap().to_vec2::<f32>().unwrap();
+    let err = |f: &dyn Fn(Vec3) -> Vec3| {
+        t.positions
+            .iter()
+            .zip(&learned)
+            .map(|(&p, l)| (Vec3::from_slice(l) - f(p)).abs().element_sum())
+            .sum::<f32>()
+            / t.positions.len() as f32
+    };
+    assert!(
+        err(&albedo) < 0.6 * err(&|_| Vec3::ZERO),
+        "{} vs {}",
+        err(&albedo),
+        err(&|_| Vec3::ZERO)
+    );
+    // SkinNet was frozen.
+    let mut b = Trainer::new(data, stage_config(40, 0, 0), false).unwrap();
+    b.run(&dir.path().join("b"), false).unwrap();
+    assert_eq!(
+        a.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap(),
+        b.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap()
+    );
+    b.run_stages(imgs, &dir.path().join("b"), false).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("a/stages.csv")).unwrap(),
+        std::fs::read_to_string(dir.path().join("b/stages.csv")).unwrap()
+    );
+}
+
+#[test]
+fn shadow_and_refine_stages_run_and_refine_moves_skinnet_with_the_rendering_term() {
+    let (data, truth) = scene(3);
+    let imgs = images(&data, &truth, None);
+    let dir = tempfile::tempdir().unwrap();
+    let mut t = Trainer::new(data, stage_config(5, 5, 3), false).unwrap();
+    t.run(dir.path(), false).unwrap();
+    let before = t.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap();
+    t.run_stages(imgs, dir.path(), false).unwrap();
+    assert_eq!(rows(dir.path(), "3,").len(), 5);
+    let refine = rows(dir.path(), "4,");
+    assert_eq!(refine.len(), 3);
+    for &(l, total) in &refine {
+        assert!(l > 0.0 && l.is_finite());
+        // The step's total includes λ_rend · L_rend.
+        assert!(
+            total >= t.config.stages.rendering_weight * l,
+            "{total} < λ·{l}"
+        );
+    }
+    assert_ne!(
+        before,
+        t.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap()
+    );
+    assert!(t.rendering.is_none());
+    assert_eq!(t.progress().1, 4 + 3);
+}
+
+#[test]
+fn fixed_colours_come_from_the_images_and_mismatched_images_are_rejected() {
+    let (data, truth) = scene(2);
+    let dir = tempfile::tempdir().unwrap();
+    let mut t = Trainer::new(data.clone(), stage_config(0, 0, 0), false).unwrap();
+    t.run(dir.path(), false).unwrap();
+    // An image linear in x: a vertex seen by the camera gets about the colour at its own
+    // projection (a barycentric mean of the pixels around it); unseen ones get the mean.
+    let camera = &data.frames[0].views[0].camera;
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let ramp = |x: f32| 0.2 + 0.6 * x / w as f32;
+    let rgb: Vec<Vec3> = (0..w * h)
+        .map(|i| Vec3::splat(ramp((i % w) as f32 + 0.5)))
+        .collect();
+    let imgs = vec![vec![RgbTarget::new(w, h, &rgb).unwrap()]; data.frames.len()];
+    let colours = t.canonical_vertex_colours(&imgs).unwrap();
+    let posed = t
+        .posed(&[0])
+        .unwrap()
+        .get(0)
+        .unwrap()
+        .to_vec2::<f32>()
+        .unwrap();
+    let near = colours
+        .iter()
+        .zip(&posed)
+        .filter(|(c, p)| {
+            let u = camera.project(Vec3::from_slice(p)).unwrap().x;
+            (c.x - ramp(u)).abs() < 0.03 && c.x == c.y && c.y == c.z
+        })
+        .count();
+    assert!(near > colours.len() * 2 / 5, "{near} of {}", colours.len());
+    assert!(colours.iter().all(|c| c.x >= 0.2 && c.x <= 0.8));
+    let mut short = images(&data, &truth, None);
+    short.pop();
+    assert!(matches!(
+        t.run_stages(short, dir.path(), false),
+        Err(TrainError::Data(_))
+    ));
+}
+
+#[test]
+fn stage_config_reads_from_json_and_names_bad_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("c.json");
+    std::fs::write(
+        &p,
+        r#"{"stages": {"albedo_iterations": 5, "colours": "albedo_only"}}"#,
+    )
+    .unwrap();
+    let c = TrainConfig::load(&p).unwrap();
+    assert_eq!(c.stages.albedo_iterations, 5);
+    assert_eq!(c.stages.colours, ColourSource::AlbedoOnly);
+    assert!(c.stages.any() && !TrainConfig::default().stages.any());
+    std::fs::write(&p, r#"{"stages": {"rendering_weight": -1}}"#).unwrap();
+    assert!(matches!(
+        TrainConfig::load(&p),
+        Err(crate::train::ConfigError::Field {
+            field: "stages.rendering_weight",
+            ..
+        })
+    ));
+}
