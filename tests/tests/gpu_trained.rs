@@ -112,7 +112,10 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
             .run(&mut scratch)
             .unwrap();
             for (k, (g, c)) in weights.iter().zip(&cpu_w).enumerate() {
-                assert!((g - c).abs() <= TOL, "frame {f} {mode:?} weight {k}: {g} vs {c}");
+                assert!(
+                    (g - c).abs() <= TOL,
+                    "frame {f} {mode:?} weight {k}: {g} vs {c}"
+                );
             }
             for v in 0..n {
                 for (what, g, c) in [
@@ -121,7 +124,10 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
                 ] {
                     let d = (Vec3::from_slice(g) - c).abs().max_element();
                     worst = worst.max(d);
-                    assert!(d <= TOL, "frame {f} {mode:?} {what} of vertex {v}: {g:?} vs {c}");
+                    assert!(
+                        d <= TOL,
+                        "frame {f} {mode:?} {what} of vertex {v}: {g:?} vs {c}"
+                    );
                 }
             }
         }
@@ -132,5 +138,8 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
         .map(|w| w.iter().fold(0.0f32, |m, &x| m.max(x)))
         .fold(0.0f32, f32::max);
     assert!(spread > 0.5, "max weight {spread}: the model did not train");
-    eprintln!("{n} vertices, {} test poses: worst GPU − CPU {worst:.2e}", capture.test_frames.len());
+    eprintln!(
+        "{n} vertices, {} test poses: worst GPU − CPU {worst:.2e}",
+        capture.test_frames.len()
+    );
 }

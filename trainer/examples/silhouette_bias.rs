@@ -66,13 +66,17 @@ fn terms(
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let dir = args.get(1).context("usage: silhouette_bias CAPTURE [VERTICES]")?;
+    let dir = args
+        .get(1)
+        .context("usage: silhouette_bias CAPTURE [VERTICES]")?;
     let vertices: usize = args.get(2).map_or(Ok(2500), |s| s.parse())?;
     let capture = load_capture(dir)?;
     let (template, source) = simplify_template(&capture.template, vertices);
     let initial = PreparedSkinning::new(&capture, &Skinning::Initial)?;
     let pick = |all: &[Vec3]| -> Vec<Vec3> { source.iter().map(|&i| all[i as usize]).collect() };
-    println!("frame | initial boundary/contour px | truth boundary/contour px | truth normal force");
+    println!(
+        "frame | initial boundary/contour px | truth boundary/contour px | truth normal force"
+    );
     let mut sums = [0.0f64; 5];
     for &f in &capture.test_frames {
         let views: Vec<_> = capture
@@ -82,7 +86,8 @@ fn main() -> anyhow::Result<()> {
             .enumerate()
             .map(|(c, cam)| {
                 let m = capture.load_mask(c, f)?;
-                let t = SilhouetteTarget::from_mask(m.width as usize, m.height as usize, &m.inside)?;
+                let t =
+                    SilhouetteTarget::from_mask(m.width as usize, m.height as usize, &m.inside)?;
                 Ok((cam.clone(), t))
             })
             .collect::<anyhow::Result<_>>()?;
@@ -93,7 +98,10 @@ fn main() -> anyhow::Result<()> {
             // Outward normals: positive mean n · (x − centroid).
             let c = truth.iter().copied().sum::<Vec3>() / truth.len() as f32;
             let out: f32 = truth.iter().zip(&tn).map(|(p, n)| n.dot(*p - c)).sum();
-            println!("normals point {}", if out > 0.0 { "outwards" } else { "inwards" });
+            println!(
+                "normals point {}",
+                if out > 0.0 { "outwards" } else { "inwards" }
+            );
         }
         let inn = area_weighted_normals(&init, &template.triangles);
         let a = terms(&init, &inn, &template.triangles, &views)?;
@@ -102,9 +110,9 @@ fn main() -> anyhow::Result<()> {
             "{f:5} | {:.3} / {:.3} | {:.3} / {:.3} | {:+.4e}",
             a.boundary, a.contour, b.boundary, b.contour, b.normal_force
         );
-        for (s, v) in sums
-            .iter_mut()
-            .zip([a.boundary, a.contour, b.boundary, b.contour, b.normal_force])
+        for (s, v) in
+            sums.iter_mut()
+                .zip([a.boundary, a.contour, b.boundary, b.contour, b.normal_force])
         {
             *s += v;
         }

@@ -347,9 +347,7 @@ impl Trainer {
         } else {
             self.config.batch
         };
-        (0..batch)
-            .map(|_| rng.random_range(0..n))
-            .collect()
+        (0..batch).map(|_| rng.random_range(0..n)).collect()
     }
 
     /// One warm-start iteration: the Kullback–Leibler divergence `Σ_j w_init·ln(w_init/w)` from
@@ -378,7 +376,11 @@ impl Trainer {
             .map(|&x| f64::from(x) * f64::from(x).ln())
             .sum::<f64>()
             / v as f64;
-        let cross = (w.clamp(1e-12, 1.0)?.log()?.broadcast_mul(&init)?.sum_all()?
+        let cross = (w
+            .clamp(1e-12, 1.0)?
+            .log()?
+            .broadcast_mul(&init)?
+            .sum_all()?
             / (-((frames.len() * v) as f64)))?;
         let value = f64::from(cross.to_vec0::<f32>()?) + entropy;
         self.optimiser.backward_step(&cross)?;

@@ -279,9 +279,15 @@ fn warm_start_regresses_the_initial_weights() {
         .sum::<f64>()
         / (w.len() / 2) as f64;
     assert!(first > 0.3 && last < 0.2 * first, "KL {first} → {last}");
-    assert!(kl < 2.0 * last + 1e-3, "KL after the last step {kl}, before it {last}");
+    assert!(
+        kl < 2.0 * last + 1e-3,
+        "KL after the last step {kl}, before it {last}"
+    );
     let after = mean_error(&t);
-    assert!(after < 0.25 * before, "mean |w − w_init| {before} → {after}");
+    assert!(
+        after < 0.25 * before,
+        "mean |w − w_init| {before} → {after}"
+    );
 }
 
 /// All parameters, in name order.
