@@ -64,6 +64,8 @@ pub struct TrainConfig {
     /// pose, so one frame per iteration sees as many vertices per step at a quarter of the cost
     /// of four, and the poses still vary from step to step.
     pub warm_start_batch: usize,
+    /// Weight of the warm start's posed-position term, per cm² ([`super::Trainer::warm_step`]).
+    pub warm_start_position_weight: f64,
     /// Adam settings (paper: lr 1e-3, gradient values clipped to [−1, 1]).
     pub adam: AdamConfig,
     /// Image-loss iterations over which the learning rate ramps linearly up to `adam.lr` (0:
@@ -103,6 +105,7 @@ impl Default for TrainConfig {
             batch: 4,
             warm_start_iterations: 300,
             warm_start_batch: 4,
+            warm_start_position_weight: 1.0,
             adam: AdamConfig::default(),
             lr_warmup: 25,
             weights: LossWeights::default(),
@@ -172,6 +175,10 @@ impl TrainConfig {
         }
         if self.warm_start_batch == 0 || self.warm_start_batch > 64 {
             return Err("warm_start_batch");
+        }
+        if !(self.warm_start_position_weight.is_finite() && self.warm_start_position_weight >= 0.0)
+        {
+            return Err("warm_start_position_weight");
         }
         if !(self.adam.lr.is_finite() && self.adam.lr > 0.0) {
             return Err("adam.lr");

@@ -264,12 +264,18 @@ fn warm_start_regresses_the_initial_weights() {
             / n as f32
     };
     let before = mean_error(&t);
-    let first = t.warm_step().unwrap();
+    let r = t.warm_step().unwrap();
+    let (first, first_position) = (r.kl, r.position_cm2);
     // The reported value is the KL divergence of the weights before the step, recomputed here.
-    let mut last = first;
+    let (mut last, mut last_position) = (first, first_position);
     for _ in 1..80 {
-        last = t.warm_step().unwrap();
+        let r = t.warm_step().unwrap();
+        (last, last_position) = (r.kl, r.position_cm2);
     }
+    assert!(
+        last_position < 0.2 * first_position,
+        "posed-position term {first_position} → {last_position} cm²"
+    );
     let w = outputs(&t);
     let kl: f64 = w
         .iter()
