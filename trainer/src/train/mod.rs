@@ -351,6 +351,24 @@ impl Trainer {
         })
     }
 
+    /// Skinning matrices of `frames` as `[B, J, 4, 4]`-shaped data for [`lbs`].
+    fn frame_skinning(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
+        let mats: Vec<Vec<Mat4>> = frames
+            .iter()
+            .map(|&f| self.data.frames[f].skinning.clone())
+            .collect();
+        Ok(skinning_tensor(&mats, &Device::Cpu)?)
+    }
+
+    /// The template posed with the initial weights under `skinning` (`B` frames) → `[B, V, 3]`.
+    fn initial_posing(&self, skinning: &Tensor, b: usize) -> Result<Tensor, TrainError> {
+        let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
+        let init = Tensor::from_vec(self.data.init_weights.clone(), (1, v, j), &Device::Cpu)?
+            .broadcast_as((b, v, j))?
+            .contiguous()?;
+        Ok(lbs(&init, skinning, &self.rest)?)
+    }
+
     fn sample(&self, phase: u64, iteration: u64) -> Vec<usize> {
         let mut rng = frame_rng(self.config.seed, phase, iteration);
         let n = self.data.frames.len();
@@ -374,9 +392,10 @@ impl Trainer {
     /// passes through the softmax Jacobian and vanishes as the weights saturate; KL's gradient
     /// with respect to the logits is `w − w_init`. But KL ignores the joints a vertex has no
     /// initial weight on, and a small leak onto a far joint moves the vertex by centimetres; the
-    /// position term weighs every weight error by how far it moves the vertex. On the built-in
-    /// capture (Chamfer after the warm start alone; bone heat 1.003 cm): 300 squared-error
-    /// iterations 1.161 cm, 300 KL iterations 1.059 cm.
+    /// position term weighs every weight error by how far it moves the vertex (off by default:
+    /// it did not help in the runs measured, see `TrainConfig::warm_start_position_weight`). On
+    /// the built-in capture (Chamfer after the warm start alone; bone heat 1.003 cm): 300
+    /// squared-error iterations 1.161 cm, 300 KL iterations 1.059 cm.
     pub fn warm_step(&mut self) -> Result<WarmRecord, TrainError> {
         if matches!(self.model, Model::Static { .. }) {
             self.warm_done += 1;
@@ -402,13 +421,8 @@ impl Trainer {
             .broadcast_mul(&init)?
             .sum_all()?
             / (-((b * v) as f64)))?;
-        let mats: Vec<Vec<Mat4>> = frames
-            .iter()
-            .map(|&f| self.data.frames[f].skinning.clone())
-            .collect();
-        let skinning = skinning_tensor(&mats, &Device::Cpu)?;
-        let init_b = init.broadcast_as((b, v, j))?.contiguous()?;
-        let offset = (lbs(&w, &skinning, &self.rest)? - lbs(&init_b, &skinning, &self.rest)?)?;
+        let skinning = self.frame_skinning(&frames)?;
+        let offset = (lbs(&w, &skinning, &self.rest)? - self.initial_posing(&skinning, b)?)?;
         // m² → cm².
         let position = (offset.sqr()?.sum_all()? * (1e4 / (b * v) as f64))?;
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
@@ -445,11 +459,7 @@ impl Trainer {
         let frames = self.sample(PHASE_IMAGE, self.done);
         let w = self.weights(&frames)?;
         let b = frames.len();
-        let mats: Vec<Vec<Mat4>> = frames
-            .iter()
-            .map(|&f| self.data.frames[f].skinning.clone())
-            .collect();
-        let skinning = skinning_tensor(&mats, &Device::Cpu)?;
+        let skinning = self.frame_skinning(&frames)?;
         let posed = lbs(&w, &skinning, &self.rest)?;
         let posed_values = posed.to_vec3::<f32>()?;
         let mut boundary = Vec::new();
@@ -481,18 +491,8 @@ impl Trainer {
         let v = self.data.template.vertex_count() as f64;
         let lap_input = match self.config.laplacian_reference {
             LaplacianReference::Absolute => posed.clone(),
-            LaplacianReference::InitialSkinning => {
-                // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
-                let j = self.data.skeleton.len();
-                let init = Tensor::from_vec(
-                    self.data.init_weights.clone(),
-                    (1, self.data.template.vertex_count(), j),
-                    &Device::Cpu,
-                )?
-                .broadcast_as((b, self.data.template.vertex_count(), j))?
-                .contiguous()?;
-                (&posed - lbs(&init, &skinning, &self.rest)?)?
-            }
+            // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
+            LaplacianReference::InitialSkinning => (&posed - self.initial_posing(&skinning, b)?)?,
         };
         let lap = (self.laplacian.loss(&lap_input)? / (b as f64 * v))?;
         let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
