@@ -1,55 +1,17 @@
 //! Resampled templates through evaluation, rendering and a trained model: SkinNet poses a mesh
 //! of any resolution over the capture's canonical space, static weights refuse to.
 
-use std::path::Path;
-
-use skinfield_formats::capture::{Capture, load_capture};
 use skinfield_formats::gltf_io::write_gltf_character;
-use skinfield_formats::skf::{ModelConfig, Net, SkfModel};
 use skinfield_runtime::resample::{Target, resample, transfer_skin};
 use skinfield_runtime::{BoundMesh, FrameState, Scratch, SkinNetModel, WeightsJob};
 
+use super::tests::{root_only_skf, tiny_capture};
 use super::*;
-use crate::synth::{SynthConfig, synthesize};
 
 const OPTIONS: EvalOptions = EvalOptions {
     samples: 4000,
     seed: 11,
 };
-
-fn tiny_capture(dir: &Path) -> Capture {
-    synthesize(dir, &SynthConfig::tiny()).unwrap();
-    load_capture(dir).unwrap()
-}
-
-/// A SkinNet that gives every point the root joint alone (zero weights, output bias e^30 for
-/// the root): every template it poses moves rigidly with the root, so its result is known.
-fn root_only_skf(capture: &Capture, path: &Path) {
-    let b = capture.template.bounds().unwrap();
-    let mut config = ModelConfig::vinecs(
-        capture.skeleton.len() as u32,
-        b.min.to_array(),
-        b.max.to_array(),
-    );
-    config.pe_frequencies = 2;
-    config.hidden_count = 3;
-    config.hidden = [8, 8, 8, 0, 0, 0, 0, 0];
-    let mut model = SkfModel {
-        config,
-        skeleton: capture.skeleton.clone(),
-        tensors: Vec::new(),
-    };
-    let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
-    let last = shapes.len() - 1;
-    for (i, (out, inp)) in shapes.into_iter().enumerate() {
-        let mut bias = vec![0.0; out];
-        if i == last {
-            bias[0] = 30.0;
-        }
-        model.push_layer(Net::Skin, i, vec![0.0; out * inp], out, inp, bias);
-    }
-    std::fs::write(path, model.to_bytes().unwrap()).unwrap();
-}
 
 #[test]
 fn a_subdivided_template_scores_like_the_original_surface_and_a_coarse_one_does_not() {

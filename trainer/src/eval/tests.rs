@@ -10,9 +10,40 @@ use skinfield_formats::skf::{ModelConfig, Net, SkfModel};
 use super::*;
 use crate::synth::{SynthConfig, synthesize};
 
-fn tiny_capture(dir: &Path) -> Capture {
+pub(super) fn tiny_capture(dir: &Path) -> Capture {
     synthesize(dir, &SynthConfig::tiny()).unwrap();
     load_capture(dir).unwrap()
+}
+
+/// A SkinNet that gives every point the root joint alone (zero weights, output bias e^30 for
+/// the root): every template it poses moves rigidly with the root, so its result is known.
+/// Written to `path`; also returned.
+pub(super) fn root_only_skf(capture: &Capture, path: &Path) -> SkfModel {
+    let b = capture.template.bounds().unwrap();
+    let mut config = ModelConfig::vinecs(
+        capture.skeleton.len() as u32,
+        b.min.to_array(),
+        b.max.to_array(),
+    );
+    config.pe_frequencies = 2;
+    config.hidden_count = 3;
+    config.hidden = [8, 8, 8, 0, 0, 0, 0, 0];
+    let mut model = SkfModel {
+        config,
+        skeleton: capture.skeleton.clone(),
+        tensors: Vec::new(),
+    };
+    let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
+    let last = shapes.len() - 1;
+    for (i, (out, inp)) in shapes.into_iter().enumerate() {
+        let mut bias = vec![0.0; out];
+        if i == last {
+            bias[0] = 30.0;
+        }
+        model.push_layer(Net::Skin, i, vec![0.0; out * inp], out, inp, bias);
+    }
+    std::fs::write(path, model.to_bytes().unwrap()).unwrap();
+    model
 }
 
 const OPTIONS: EvalOptions = EvalOptions {
@@ -120,31 +151,8 @@ fn a_skinnet_that_outputs_one_joint_scores_like_those_static_weights() {
     // inside; its `ours` row must equal the `static` row of root-only weights.
     let dir = tempfile::tempdir().unwrap();
     let capture = tiny_capture(dir.path());
-    let b = capture.template.bounds().unwrap();
-    let mut config = ModelConfig::vinecs(
-        capture.skeleton.len() as u32,
-        b.min.to_array(),
-        b.max.to_array(),
-    );
-    config.pe_frequencies = 2;
-    config.hidden_count = 3;
-    config.hidden = [8, 8, 8, 0, 0, 0, 0, 0];
-    let mut model = SkfModel {
-        config,
-        skeleton: capture.skeleton.clone(),
-        tensors: Vec::new(),
-    };
-    let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
-    let last = shapes.len() - 1;
-    for (i, (out, inp)) in shapes.into_iter().enumerate() {
-        let mut bias = vec![0.0; out];
-        if i == last {
-            bias[0] = 30.0;
-        }
-        model.push_layer(Net::Skin, i, vec![0.0; out * inp], out, inp, bias);
-    }
     let skf = dir.path().join("root.skf");
-    std::fs::write(&skf, model.to_bytes().unwrap()).unwrap();
+    let model = root_only_skf(&capture, &skf);
     let root_only = dir.path().join("root.json");
     write_weights(&capture, &root_only, Some(0));
 
