@@ -136,6 +136,27 @@ pub(crate) mod fixtures {
     use skinfield_formats::Template;
     use skinfield_formats::mesh::PartLabel;
 
+    /// The triangles of a UV sphere with the north pole at vertex 0, the south pole at `south`
+    /// and ring `r` (1..rings), longitude `s` (0..=segments) at vertex `at(r, s)`.
+    fn sphere_triangles(
+        rings: u32,
+        segments: u32,
+        south: u32,
+        at: impl Fn(u32, u32) -> u32,
+    ) -> Vec<[u32; 3]> {
+        let mut triangles = Vec::new();
+        for s in 0..segments {
+            triangles.push([0, at(1, s + 1), at(1, s)]);
+            triangles.push([south, at(rings - 1, s), at(rings - 1, s + 1)]);
+            for r in 1..rings - 1 {
+                let (a, b, c, d) = (at(r, s), at(r, s + 1), at(r + 1, s), at(r + 1, s + 1));
+                triangles.push([a, b, d]);
+                triangles.push([a, d, c]);
+            }
+        }
+        triangles
+    }
+
     /// A UV sphere of radius 1 (closed, welded): `rings` latitude bands, `segments` longitudes.
     /// Colours and UVs are affine in the position, so any barycentric transfer is exact.
     pub fn sphere(rings: u32, segments: u32) -> Template {
@@ -154,16 +175,7 @@ pub(crate) mod fixtures {
         positions.push(Vec3::NEG_Y);
         let south = positions.len() as u32 - 1;
         let at = |r: u32, s: u32| 1 + (r - 1) * segments + s % segments;
-        let mut triangles = Vec::new();
-        for s in 0..segments {
-            triangles.push([0, at(1, s + 1), at(1, s)]);
-            triangles.push([south, at(rings - 1, s), at(rings - 1, s + 1)]);
-            for r in 1..rings - 1 {
-                let (a, b, c, d) = (at(r, s), at(r, s + 1), at(r + 1, s), at(r + 1, s + 1));
-                triangles.push([a, b, d]);
-                triangles.push([a, d, c]);
-            }
-        }
+        let triangles = sphere_triangles(rings, segments, south, at);
         with_affine_attributes(positions, triangles)
     }
 
@@ -191,16 +203,7 @@ pub(crate) mod fixtures {
         uvs.push(Vec2::new(0.5, 1.0));
         let south = positions.len() as u32 - 1;
         let at = |r: u32, s: u32| 1 + (r - 1) * (segments + 1) + s;
-        let mut triangles = Vec::new();
-        for s in 0..segments {
-            triangles.push([0, at(1, s + 1), at(1, s)]);
-            triangles.push([south, at(rings - 1, s), at(rings - 1, s + 1)]);
-            for r in 1..rings - 1 {
-                let (a, b, c, d) = (at(r, s), at(r, s + 1), at(r + 1, s), at(r + 1, s + 1));
-                triangles.push([a, b, d]);
-                triangles.push([a, d, c]);
-            }
-        }
+        let triangles = sphere_triangles(rings, segments, south, at);
         let mut t = with_affine_attributes(positions, triangles);
         t.uvs = Some(uvs);
         t
