@@ -11,9 +11,10 @@
 //!
 //! The paper sums every term; the means here make the weights independent of the template
 //! resolution, the image size and the number of cameras. `L_lap` is taken of the posed mesh
-//! minus the same pose under the initial weights by default ([`LaplacianReference`]). Before the image losses a warm start
-//! regresses the initial weights (KL divergence and posed positions, see [`Trainer::warm_step`]), so SkinNet starts
-//! from bone heat instead of from a uniform blend. Frame sampling draws from a generator seeded by `(seed, iteration)`, so a
+//! minus the same pose under the initial weights by default ([`LaplacianReference`]). Before
+//! the image losses a warm start regresses the initial weights (see [`Trainer::warm_step`]), so
+//! SkinNet starts from bone heat instead of from a uniform blend. Frame sampling draws from a
+//! generator seeded by `(seed, iteration)`, so a
 //! resumed run draws the same batches as an uninterrupted one.
 
 pub mod config;
@@ -179,6 +180,11 @@ pub struct Trainer {
     done: u64,
     /// Stage 4's rendering term while it runs ([`stages`]).
     rendering: Option<stages::RenderingTerm>,
+    /// The initial weights `[1, V, J]`.
+    init: Tensor,
+    /// `Σ_ij w_init ln w_init / V`, the constant that turns the warm start's cross-entropy into
+    /// a KL divergence.
+    init_entropy: f64,
 }
 
 /// Frame-sampling stream of the warm start (its batches have `warm_start_batch` frames).
@@ -279,6 +285,14 @@ impl Trainer {
         )?;
         let laplacian = UniformLaplacian::new(&t.positions, &t.triangles, &dev)?;
         let rest = rest_homogeneous(&t.positions, &dev)?;
+        let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
+        let init_entropy = data
+            .init_weights
+            .iter()
+            .filter(|&&x| x > 0.0)
+            .map(|&x| f64::from(x) * f64::from(x).ln())
+            .sum::<f64>()
+            / v as f64;
         let optimiser = Adam::from_varmap(&varmap, config.adam)?;
         Ok(Self {
             config,
@@ -293,6 +307,8 @@ impl Trainer {
             warm_done: 0,
             done: 0,
             rendering: None,
+            init,
+            init_entropy,
         })
     }
 
@@ -363,9 +379,7 @@ impl Trainer {
     /// The template posed with the initial weights under `skinning` (`B` frames) → `[B, V, 3]`.
     fn initial_posing(&self, skinning: &Tensor, b: usize) -> Result<Tensor, TrainError> {
         let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
-        let init = Tensor::from_vec(self.data.init_weights.clone(), (1, v, j), &Device::Cpu)?
-            .broadcast_as((b, v, j))?
-            .contiguous()?;
+        let init = self.init.broadcast_as((b, v, j))?.contiguous()?;
         Ok(lbs(&init, skinning, &self.rest)?)
     }
 
@@ -403,22 +417,12 @@ impl Trainer {
         }
         let frames = self.sample(PHASE_WARM, self.warm_done);
         let w = self.weights(&frames)?;
-        let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
+        let v = self.data.template.vertex_count();
         let b = frames.len();
-        let init = Tensor::from_vec(self.data.init_weights.clone(), (1, v, j), &Device::Cpu)?;
-        // Σ w_init ln w_init is a constant; it makes the value a divergence (0 at the optimum).
-        let entropy: f64 = self
-            .data
-            .init_weights
-            .iter()
-            .filter(|&&x| x > 0.0)
-            .map(|&x| f64::from(x) * f64::from(x).ln())
-            .sum::<f64>()
-            / v as f64;
         let cross = (w
             .clamp(1e-12, 1.0)?
             .log()?
-            .broadcast_mul(&init)?
+            .broadcast_mul(&self.init)?
             .sum_all()?
             / (-((b * v) as f64)))?;
         let skinning = self.frame_skinning(&frames)?;
@@ -426,7 +430,7 @@ impl Trainer {
         // m² → cm².
         let position = (offset.sqr()?.sum_all()? * (1e4 / (b * v) as f64))?;
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
-        let kl = f64::from(cross.to_vec0::<f32>()?) + entropy;
+        let kl = f64::from(cross.to_vec0::<f32>()?) + self.init_entropy;
         let position_cm2 = f64::from(position.to_vec0::<f32>()?);
         self.optimiser.backward_step(&total)?;
         self.warm_done += 1;
