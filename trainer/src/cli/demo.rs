@@ -11,7 +11,7 @@ use clap::Parser;
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::skf::write_atomic;
 use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
-use skinfield_trainer::eval::{EvalOptions, Skinning, evaluate};
+use skinfield_trainer::eval::{EvalOptions, PreparedSkinning, Skinning, evaluate, evaluate_frames};
 use skinfield_trainer::synth::{SynthConfig, synthesize};
 use skinfield_trainer::train::TrainConfig;
 use skinfield_trainer::train::data::{DataOptions, initial_weights};
@@ -174,10 +174,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             std::fs::read_to_string(&csv_path).with_context(|| csv_path.display().to_string())?;
         plot_losses(&csv, &out.join(name))?;
     }
-    let frame = *capture
-        .test_frames
-        .last()
-        .context("the capture has no test frames")?;
+    // The pictures show the test frame bone heat gets most wrong (a frame near the rest pose
+    // would show nothing).
+    let initial_skinning = PreparedSkinning::new(&capture, &Skinning::Initial)?;
+    let frame = evaluate_frames(&capture, &EvalOptions::default(), |f| {
+        initial_skinning.pose_frame(&capture, f)
+    })?
+    .iter()
+    .max_by(|a, b| (a.m2s_cm + a.s2m_cm).total_cmp(&(b.m2s_cm + b.s2m_cm)))
+    .map(|m| m.frame)
+    .context("the capture has no test frames")?;
     for (weights, kind, name) in [
         (
             Skinning::Skf(model.clone()),

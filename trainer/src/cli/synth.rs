@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args as ClapArgs;
 use skinfield_formats::capture::ImageFormat;
-use skinfield_trainer::synth::{GltfSource, SynthConfig, synthesize, synthesize_gltf};
+use skinfield_trainer::synth::{GltfSource, SynthConfig, TestMotions, synthesize, synthesize_gltf};
 
 /// Arguments of `trainer synth`.
 #[derive(ClapArgs, Debug)]
@@ -39,6 +39,10 @@ pub struct Args {
     /// Write the colour images as linear float EXR instead of 8-bit sRGB PNG.
     #[arg(long)]
     pub exr: bool,
+    /// Test poses: `novel` (the test clips, beyond the training ranges) or `held-out-phases`
+    /// (the training clips between their training frames; built-in character only).
+    #[arg(long, value_enum, default_value = "novel")]
+    pub test_motions: TestMotionsArg,
     /// A rigged glTF/GLB character instead of the built-in one.
     #[arg(long)]
     pub character: Option<PathBuf>,
@@ -51,6 +55,15 @@ pub struct Args {
     /// Test clip names (with `--character`), disjoint from the training clips.
     #[arg(long, value_delimiter = ',', requires = "character")]
     pub test_clips: Vec<String>,
+}
+
+/// `--test-motions` values.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum TestMotionsArg {
+    /// The test clips, beyond the training ranges.
+    Novel,
+    /// The training clips at phases between their training frames.
+    HeldOutPhases,
 }
 
 /// Runs `trainer synth`.
@@ -67,6 +80,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ImageFormat::Exr
         } else {
             ImageFormat::Png
+        },
+        test_motions: match args.test_motions {
+            TestMotionsArg::Novel => TestMotions::Novel,
+            TestMotionsArg::HeldOutPhases => TestMotions::HeldOutPhases,
         },
         seed: args.seed,
         ..SynthConfig::default()

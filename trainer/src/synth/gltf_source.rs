@@ -75,6 +75,13 @@ pub fn synthesize_gltf(
 ) -> Result<SynthSummary, SynthError> {
     config.validate()?;
     let start = Instant::now();
+    if config.test_motions != super::TestMotions::Novel {
+        return Err(SynthError::Config {
+            field: "test_motions",
+            reason: "held-out phases are for the built-in character; name test clips instead"
+                .into(),
+        });
+    }
     if source.train_clips.is_empty() {
         return Err(SynthError::Config {
             field: "train_clips",

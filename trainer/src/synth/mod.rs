@@ -24,6 +24,7 @@ pub mod texture;
 pub mod weights;
 
 pub use gltf_source::{GltfSource, synthesize_gltf};
+pub use motion::TestMotions;
 pub use output::{SynthSummary, synthesize};
 
 /// Why a synthetic capture could not be made.
@@ -73,6 +74,9 @@ pub struct SynthConfig {
     pub shadow_map: usize,
     /// Colour images as 8-bit sRGB PNG or linear float EXR (masks are always PNG).
     pub image_format: ImageFormat,
+    /// Which poses the test frames hold (the novel test clips, or held-out phases of the
+    /// training clips; built-in character only).
+    pub test_motions: TestMotions,
     /// Seed of every random choice (colour noise, motion amplitudes, camera jitter).
     pub seed: u64,
 }
@@ -89,6 +93,7 @@ impl Default for SynthConfig {
             target_vertices: 10_000,
             shadow_map: 512,
             image_format: ImageFormat::Png,
+            test_motions: TestMotions::Novel,
             seed: 0,
         }
     }
@@ -108,6 +113,7 @@ impl SynthConfig {
             target_vertices: 2500,
             shadow_map: 96,
             image_format: ImageFormat::Png,
+            test_motions: TestMotions::Novel,
             seed: 0,
         }
     }
@@ -122,6 +128,14 @@ impl SynthConfig {
         };
         if self.train_frames_per_clip == 0 {
             return bad("train_frames_per_clip", "must be at least 1");
+        }
+        if self.test_motions == TestMotions::HeldOutPhases
+            && self.test_frames_per_clip > self.train_frames_per_clip
+        {
+            return bad(
+                "test_frames_per_clip",
+                "held-out phases need at most train_frames_per_clip test frames per clip",
+            );
         }
         if self.cameras == 0 || self.cameras > 256 {
             return bad("cameras", "must be 1 to 256");

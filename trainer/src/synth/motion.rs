@@ -5,6 +5,11 @@
 //! the left leg, a low kick. Test clips are other motions or ranges never seen in training: a
 //! high kick (hip flexion up to 1.9 rad; training stays ≤ 1.0), a turn with strongly twisted
 //! forearms (|twist| up to 1.5 rad) and a deep lunge on the right leg.
+//!
+//! [`TestMotions::HeldOutPhases`] replaces the test clips by the training clips sampled halfway
+//! between the training frames: poses from the training distribution that training never saw.
+//! Comparing a model on both splits separates overfitting the pose dependence (novel poses get
+//! worse, held-out phases do not) from a model that is wrong everywhere.
 
 use glam::{Quat, Vec3};
 use rand::Rng;
@@ -34,6 +39,17 @@ pub const CLIPS: [(&str, Split); 8] = [
     ("turn_twist", Split::Test),
     ("lunge_right_deep", Split::Test),
 ];
+
+/// Which poses the test frames hold.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TestMotions {
+    /// The three test clips, beyond the training ranges (the paper's protocol).
+    #[default]
+    Novel,
+    /// The five training clips at phases halfway between the training frames, with the
+    /// training clips' amplitudes: in-distribution, unseen poses.
+    HeldOutPhases,
+}
 
 /// Joint angles of one frame, addressed by joint and axis index, clamped to the limits.
 struct Angles<'a> {
@@ -169,40 +185,77 @@ fn frame(skeleton: &Skeleton, clip: &str, s: f32, amp: f32) -> (f32, Vec3, Vec<f
     (yaw, root, a.values)
 }
 
-/// One frame of the motion: its clip and pose.
+/// One frame of the motion: its clip, split and pose.
 #[derive(Clone, Debug)]
 pub struct MotionFrame {
     /// Clip index into [`CLIPS`].
     pub clip: usize,
+    /// Training or test frame (a training clip's held-out phases are test frames).
+    pub split: Split,
     /// The pose.
     pub pose: Pose,
 }
 
-/// All clips, `train_frames` frames per training clip and `test_frames` per test clip;
-/// `seed` varies each clip's amplitude by ±8 % and the subject's starting heading.
+/// All clips, `train_frames` frames per training clip and `test_frames` per test clip (with
+/// [`TestMotions::HeldOutPhases`], per training clip), training frames first; `seed` varies
+/// each clip's amplitude by ±8 % and the subject's starting heading. The training frames do not
+/// depend on `test_motions`.
 pub fn library(
     skeleton: &Skeleton,
     train_frames: usize,
     test_frames: usize,
+    test_motions: TestMotions,
     seed: u64,
 ) -> Result<Vec<MotionFrame>, SkeletonError> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let heading: f32 = rng.random_range(-0.3..0.3);
+    // Drawn for every clip in order, whatever the split, so both test choices share the
+    // training clips' amplitudes.
+    let amplitudes: Vec<f32> = CLIPS.iter().map(|_| rng.random_range(0.92..1.08)).collect();
+    let sample = |c: usize, s: f32, split: Split| -> Result<MotionFrame, SkeletonError> {
+        let (yaw, root, angles) = frame(skeleton, CLIPS[c].0, s, amplitudes[c]);
+        let pose =
+            skeleton.pose_from_angles(Quat::from_rotation_y(heading + yaw), root, &angles)?;
+        Ok(MotionFrame {
+            clip: c,
+            split,
+            pose,
+        })
+    };
     let mut out = Vec::new();
-    for (c, (name, split)) in CLIPS.iter().enumerate() {
-        let amp: f32 = rng.random_range(0.92..1.08);
-        let n = if *split == Split::Train {
-            train_frames
-        } else {
-            test_frames
-        };
-        for i in 0..n {
+    let clips_of = |split: Split| (0..CLIPS.len()).filter(move |&c| CLIPS[c].1 == split);
+    for c in clips_of(Split::Train) {
+        for i in 0..train_frames {
             // Phases sample the clip's cycle without repeating its first frame at the end.
-            let s = (i as f32 + 0.5) / n as f32;
-            let (yaw, root, angles) = frame(skeleton, name, s, amp);
-            let pose =
-                skeleton.pose_from_angles(Quat::from_rotation_y(heading + yaw), root, &angles)?;
-            out.push(MotionFrame { clip: c, pose });
+            out.push(sample(
+                c,
+                (i as f32 + 0.5) / train_frames as f32,
+                Split::Train,
+            )?);
+        }
+    }
+    match test_motions {
+        TestMotions::Novel => {
+            for c in clips_of(Split::Test) {
+                for i in 0..test_frames {
+                    out.push(sample(
+                        c,
+                        (i as f32 + 0.5) / test_frames as f32,
+                        Split::Test,
+                    )?);
+                }
+            }
+        }
+        TestMotions::HeldOutPhases => {
+            for c in clips_of(Split::Train) {
+                for i in 0..test_frames {
+                    // Training phase k sits at (k + ½)/T; (k + 1)/T is midway to the next.
+                    // Distinct while `test_frames ≤ train_frames` (checked by the config).
+                    let k = i * train_frames / test_frames;
+                    let s = (k + 1) as f32 / train_frames as f32;
+                    out.push(sample(c, s, Split::Test)?);
+                }
+            }
         }
     }
     Ok(out)
@@ -217,7 +270,7 @@ mod tests {
     fn max_flexion(frames: &[MotionFrame], skeleton: &Skeleton, j: usize, split: Split) -> f32 {
         frames
             .iter()
-            .filter(|f| CLIPS[f.clip].1 == split)
+            .filter(|f| f.split == split)
             .map(|f| {
                 quat_to_rotvec(
                     skeleton.bind_local()[j].rotation.inverse() * f.pose.locals[j].rotation,
@@ -230,7 +283,7 @@ mod tests {
     #[test]
     fn test_poses_go_beyond_the_training_ranges() {
         let s = build_skeleton().unwrap();
-        let frames = library(&s, 12, 8, 5).unwrap();
+        let frames = library(&s, 12, 8, TestMotions::Novel, 5).unwrap();
         assert_eq!(frames.len(), 5 * 12 + 3 * 8);
         for j in [joint::R_HIP, joint::L_FOREARM] {
             let train = max_flexion(&frames, &s, j, Split::Train);
@@ -241,7 +294,43 @@ mod tests {
             );
         }
         // Same seed, same poses.
-        let again = library(&s, 12, 8, 5).unwrap();
+        let again = library(&s, 12, 8, TestMotions::Novel, 5).unwrap();
         assert!(frames.iter().zip(&again).all(|(a, b)| a.pose == b.pose));
+    }
+
+    #[test]
+    fn held_out_phases_share_the_training_frames_and_stay_in_range() {
+        let s = build_skeleton().unwrap();
+        let novel = library(&s, 16, 8, TestMotions::Novel, 3).unwrap();
+        let held = library(&s, 16, 8, TestMotions::HeldOutPhases, 3).unwrap();
+        let train = |f: &[MotionFrame]| -> Vec<Pose> {
+            f.iter()
+                .filter(|f| f.split == Split::Train)
+                .map(|f| f.pose.clone())
+                .collect()
+        };
+        assert_eq!(train(&novel), train(&held));
+        let tests: Vec<&MotionFrame> = held.iter().filter(|f| f.split == Split::Test).collect();
+        assert_eq!(tests.len(), 5 * 8);
+        assert!(tests.iter().all(|f| CLIPS[f.clip].1 == Split::Train));
+        // Unseen: no test pose equals a training pose.
+        for t in &tests {
+            assert!(held.iter().take(5 * 16).all(|f| f.pose != t.pose));
+        }
+        // In range: a held-out phase flexes no joint beyond the training maximum (its
+        // neighbours bracket it), unlike the novel clips.
+        for j in [joint::R_HIP, joint::L_FOREARM] {
+            let train_max = max_flexion(&held, &s, j, Split::Train);
+            let held_max = max_flexion(&held, &s, j, Split::Test);
+            let novel_max = max_flexion(&novel, &s, j, Split::Test);
+            assert!(
+                held_max <= train_max + 0.1,
+                "joint {j}: {held_max} vs {train_max}"
+            );
+            assert!(
+                novel_max > train_max + 0.3,
+                "joint {j}: {novel_max} vs {train_max}"
+            );
+        }
     }
 }

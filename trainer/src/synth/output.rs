@@ -100,10 +100,20 @@ pub fn synthesize(dir: &Path, config: &SynthConfig) -> Result<SynthSummary, Synt
         &character.skeleton,
         config.train_frames_per_clip,
         config.test_frames_per_clip,
+        config.test_motions,
         config.seed,
     )?
     .into_iter()
-    .map(|f| (CLIPS[f.clip].0.to_string(), CLIPS[f.clip].1, f.pose))
+    .map(|f| {
+        let name = CLIPS[f.clip].0;
+        // A training clip's held-out phases get their own clip entry in the manifest.
+        let name = if f.split == CLIPS[f.clip].1 {
+            name.to_string()
+        } else {
+            format!("{name}_heldout")
+        };
+        (name, f.split, f.pose)
+    })
     .collect();
     let subject = Subject {
         template: &character.template,

@@ -349,7 +349,7 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
     ));
     let bad = GltfSource {
         test_clips: vec!["Moonwalk".into()],
-        ..source
+        ..source.clone()
     };
     assert!(matches!(
         synthesize_gltf(dir.path(), &config, &bad),
@@ -358,6 +358,134 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
             ..
         })
     ));
+    // Held-out phases are for the built-in motion library only.
+    let held_out = SynthConfig {
+        test_motions: TestMotions::HeldOutPhases,
+        ..config
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &held_out, &source),
+        Err(SynthError::Config {
+            field: "test_motions",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn every_invalid_config_field_is_named() {
+    let cases: [(&str, SynthConfig); 8] = [
+        (
+            "train_frames_per_clip",
+            SynthConfig {
+                train_frames_per_clip: 0,
+                ..SynthConfig::tiny()
+            },
+        ),
+        (
+            "cameras",
+            SynthConfig {
+                cameras: 0,
+                ..SynthConfig::tiny()
+            },
+        ),
+        (
+            "cameras",
+            SynthConfig {
+                cameras: 257,
+                ..SynthConfig::tiny()
+            },
+        ),
+        (
+            "width/height",
+            SynthConfig {
+                width: 4,
+                ..SynthConfig::tiny()
+            },
+        ),
+        (
+            "grid",
+            SynthConfig {
+                grid: 601,
+                ..SynthConfig::tiny()
+            },
+        ),
+        (
+            "target_vertices",
+            SynthConfig {
+                target_vertices: 10,
+                ..SynthConfig::tiny()
+            },
+        ),
+        (
+            "shadow_map",
+            SynthConfig {
+                shadow_map: 8,
+                ..SynthConfig::tiny()
+            },
+        ),
+        (
+            "test_frames_per_clip",
+            SynthConfig {
+                test_motions: TestMotions::HeldOutPhases,
+                train_frames_per_clip: 2,
+                test_frames_per_clip: 3,
+                ..SynthConfig::tiny()
+            },
+        ),
+    ];
+    assert!(SynthConfig::tiny().validate().is_ok());
+    for (field, config) in cases {
+        match config.validate() {
+            Err(SynthError::Config { field: f, .. }) => assert_eq!(f, field),
+            other => panic!("{field}: {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn held_out_phase_capture_keeps_the_training_frames_and_scores_training_clips() {
+    let (novel, held) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let config = SynthConfig {
+        train_frames_per_clip: 2,
+        ..small()
+    };
+    synthesize(novel.path(), &config).unwrap();
+    synthesize(
+        held.path(),
+        &SynthConfig {
+            test_motions: TestMotions::HeldOutPhases,
+            ..config
+        },
+    )
+    .unwrap();
+    let (a, b) = (
+        load_capture(novel.path()).unwrap(),
+        load_capture(held.path()).unwrap(),
+    );
+    assert_eq!(a.template, b.template);
+    assert_eq!(a.train_frames, b.train_frames);
+    for &f in &a.train_frames {
+        assert_eq!(a.poses[f], b.poses[f]);
+    }
+    let names: Vec<&str> = b
+        .manifest
+        .clips
+        .iter()
+        .filter(|c| c.split == "test")
+        .map(|c| c.name.as_str())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "walk_heldout",
+            "squat_heldout",
+            "arm_raise_twist_heldout",
+            "lunge_left_heldout",
+            "kick_low_heldout"
+        ]
+    );
+    assert_eq!(b.test_frames.len(), 5);
 }
 
 #[test]

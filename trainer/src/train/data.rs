@@ -5,7 +5,8 @@
 //! default keeps about 2,500 of the built-in capture's 10k vertices: one iteration then costs a
 //! quarter as much) and evaluated at full resolution. The simplified template keeps a *subset*
 //! of the original vertices (meshoptimizer's edge-collapse simplifier only removes vertices), so
-//! initial weights and part labels carry over exactly, without interpolation.
+//! initial weights and part labels carry over exactly, without interpolation. SkinNet is still
+//! queried at every full-resolution vertex over the iterations ([`super::queries`]).
 //!
 //! Only training frames are read; the capture's evaluation-only ground truth is never touched.
 
@@ -14,6 +15,7 @@ use skinfield_formats::capture::{Capture, CaptureError};
 use skinfield_formats::{StaticSkin, Template, pose_features};
 use skinfield_runtime::resample::{Target, simplify};
 
+use super::queries::QueryCells;
 use super::{Frame, TrainData, View};
 use crate::losses::silhouette::SilhouetteTarget;
 
@@ -99,6 +101,17 @@ pub fn train_data(
     }
     let (template, source) = simplify_template(&capture.template, options.train_vertices);
     let dense = initial.to_dense();
+    let full = &capture.template;
+    let queries = if source.len() < full.vertex_count() {
+        let normals = if full.normals.len() == full.vertex_count() {
+            full.normals.clone()
+        } else {
+            skinfield_formats::mesh::area_weighted_normals(&full.positions, &full.triangles)
+        };
+        QueryCells::new(&full.positions, &normals, &dense, &source)
+    } else {
+        None
+    };
     let init_weights = source
         .iter()
         .flat_map(|&v| dense[v as usize * j..(v as usize + 1) * j].iter().copied())
@@ -144,6 +157,7 @@ pub fn train_data(
         template,
         init_weights,
         frames,
+        queries,
     })
 }
 
@@ -175,5 +189,41 @@ mod tests {
         let (same, identity) = simplify_template(t, 0);
         assert_eq!(same, *t);
         assert_eq!(identity.len(), t.vertex_count());
+    }
+
+    #[test]
+    fn a_simplified_training_template_gets_query_cells_over_the_full_template() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = skinfield_formats::capture::load_capture(dir.path()).unwrap();
+        let initial = initial_weights(&capture).unwrap();
+        let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
+        let options = |train_vertices| DataOptions {
+            train_vertices,
+            ..DataOptions::default()
+        };
+        let data = train_data(&capture, &initial, &options(n / 3)).unwrap();
+        let q = data.queries.as_ref().unwrap();
+        assert_eq!(q.training_vertex_count(), data.template.vertex_count());
+        assert_eq!(q.positions, capture.template.positions);
+        let mut all = q.members.clone();
+        all.sort_unstable();
+        assert_eq!(all, (0..n as u32).collect::<Vec<_>>());
+        for (i, &s) in q.source.iter().enumerate() {
+            let s = s as usize;
+            assert_eq!(data.template.positions[i], capture.template.positions[s]);
+            assert!(q.cell(i).contains(&(s as u32)));
+            assert_eq!(
+                q.init_weights[s * j..(s + 1) * j],
+                data.init_weights[i * j..(i + 1) * j]
+            );
+        }
+        // At full resolution every vertex is a training vertex: no cells.
+        assert!(
+            train_data(&capture, &initial, &options(0))
+                .unwrap()
+                .queries
+                .is_none()
+        );
     }
 }

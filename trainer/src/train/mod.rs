@@ -20,6 +20,7 @@
 pub mod config;
 pub mod data;
 pub mod plot;
+pub mod queries;
 pub mod stages;
 
 use std::collections::HashMap;
@@ -76,6 +77,9 @@ pub struct TrainData {
     pub init_weights: Vec<f32>,
     /// Training frames.
     pub frames: Vec<Frame>,
+    /// Full-resolution query points of the training vertices (`None`: query the training
+    /// vertices themselves, e.g. at full resolution); see [`queries`].
+    pub queries: Option<queries::QueryCells>,
 }
 
 /// Why training cannot start or continue.
@@ -159,8 +163,13 @@ pub struct WarmRecord {
 
 /// What is being optimised.
 enum Model {
-    /// SkinNet with the template's encoded positions `[V, 3 + 6L]`.
-    Net { net: SkinNet, encoded: Tensor },
+    /// SkinNet with the training vertices' encoded positions `[V, 3 + 6L]`, and with
+    /// [`TrainData::queries`] the full-resolution query points' `[N, 3 + 6L]`.
+    Net {
+        net: SkinNet,
+        encoded: Tensor,
+        query_encoded: Option<Tensor>,
+    },
     /// Static baseline: per-vertex logits `[V, J]`, weights = softmax.
     Static { logits: Var },
 }
@@ -182,6 +191,8 @@ pub struct Trainer {
     rendering: Option<stages::RenderingTerm>,
     /// The initial weights `[1, V, J]`.
     init: Tensor,
+    /// With [`TrainData::queries`]: the full-resolution initial weights `[N, J]`.
+    query_init: Option<Tensor>,
     /// `Σ_ij w_init ln w_init / V`, the constant that turns the warm start's cross-entropy into
     /// a KL divergence.
     init_entropy: f64,
@@ -191,6 +202,17 @@ pub struct Trainer {
 const PHASE_WARM: u64 = 1;
 /// Frame-sampling stream of the image-loss iterations (stages 2–4 use 12–14).
 const PHASE_IMAGE: u64 = 2;
+/// Added to a phase for its query-point stream ([`queries`]).
+const PHASE_QUERY_OFFSET: u64 = 100;
+
+/// `Σ_ij w ln w / v` of dense weights `w`: with the cross-entropy, the KL divergence.
+fn mean_neg_entropy(w: &[f32], v: usize) -> f64 {
+    w.iter()
+        .filter(|&&x| x > 0.0)
+        .map(|&x| f64::from(x) * f64::from(x).ln())
+        .sum::<f64>()
+        / v.max(1) as f64
+}
 
 fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {
     // Distinct, reproducible streams per (seed, phase, iteration).
@@ -239,7 +261,10 @@ impl Trainer {
         let (lo, hi) = (bounds.min, bounds.max);
         // A margin so points slightly outside the template (other resolutions) stay in [−1, 1].
         let pad = (hi - lo).max_element() * 0.05;
-        let mc = ModelConfig::vinecs(j as u32, (lo - pad).to_array(), (hi + pad).to_array());
+        let mc = ModelConfig {
+            pe_frequencies: config.pe_frequencies,
+            ..ModelConfig::vinecs(j as u32, (lo - pad).to_array(), (hi + pad).to_array())
+        };
         let varmap = VarMap::new();
         let model = if static_weights {
             // See `TrainConfig::static_epsilon` for the trade-off.
@@ -265,6 +290,10 @@ impl Trainer {
             Model::Net {
                 net: SkinNet::new(&vb.pp(PREFIX), mc)?,
                 encoded: encode_positions(&mc, &t.positions, &dev)?,
+                query_encoded: match &data.queries {
+                    Some(q) => Some(encode_positions(&mc, &q.positions, &dev)?),
+                    None => None,
+                },
             }
         };
         let graph = MeshGraph::new(&t.positions, &t.triangles);
@@ -286,13 +315,23 @@ impl Trainer {
         let laplacian = UniformLaplacian::new(&t.positions, &t.triangles, &dev)?;
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
-        let init_entropy = data
-            .init_weights
-            .iter()
-            .filter(|&&x| x > 0.0)
-            .map(|&x| f64::from(x) * f64::from(x).ln())
-            .sum::<f64>()
-            / v as f64;
+        let init_entropy = mean_neg_entropy(&data.init_weights, v);
+        let query_init = match &data.queries {
+            Some(q) if !static_weights => {
+                if q.training_vertex_count() != v || q.init_weights.len() != q.positions.len() * j {
+                    return Err(TrainError::Data(format!(
+                        "queries: {} cells and {} initial weights for {v} training vertices and \
+                         {} query points × {j} joints",
+                        q.training_vertex_count(),
+                        q.init_weights.len(),
+                        q.positions.len()
+                    )));
+                }
+                let n = q.positions.len();
+                Some(Tensor::from_vec(q.init_weights.clone(), (n, j), &dev)?)
+            }
+            _ => None,
+        };
         let optimiser = Adam::from_varmap(&varmap, config.adam)?;
         Ok(Self {
             config,
@@ -308,6 +347,7 @@ impl Trainer {
             done: 0,
             rendering: None,
             init,
+            query_init,
             init_entropy,
         })
     }
@@ -343,17 +383,31 @@ impl Trainer {
         (self.warm_done, self.done)
     }
 
-    /// Weights `[B, V, J]` for the given frames.
+    /// Weights `[B, V, J]` for the given frames, queried at the training vertices.
     pub fn weights(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
+        self.weights_at(frames, None)
+    }
+
+    /// Weights `[B, V, J]` for the given frames, SkinNet queried at rows `query` (`[V]`) of the
+    /// full-resolution query points, or at the training vertices themselves (`None`).
+    fn weights_at(&self, frames: &[usize], query: Option<&Tensor>) -> Result<Tensor, TrainError> {
         let j = self.data.skeleton.len();
         Ok(match &self.model {
-            Model::Net { net, encoded } => {
+            Model::Net {
+                net,
+                encoded,
+                query_encoded,
+            } => {
                 let poses: Vec<f32> = frames
                     .iter()
                     .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
                     .collect();
+                let rows = match (query, query_encoded) {
+                    (Some(q), Some(points)) => points.index_select(q, 0)?,
+                    _ => encoded.clone(),
+                };
                 net.forward(
-                    encoded,
+                    &rows,
                     &Tensor::from_vec(poses, (frames.len(), 3 * j), &Device::Cpu)?,
                 )?
             }
@@ -367,6 +421,30 @@ impl Trainer {
         })
     }
 
+    /// The query rows of one iteration of `phase`: a seeded member of every training vertex's
+    /// cell ([`queries::QueryCells::draw`]), or `None` (query the training vertices) without
+    /// query cells or with `full_resolution_queries` off.
+    fn draw_queries(&self, phase: u64, iteration: u64) -> Result<Option<Tensor>, TrainError> {
+        match (&self.data.queries, &self.query_init) {
+            (Some(q), Some(_)) if self.config.full_resolution_queries => {
+                let mut rng = frame_rng(self.config.seed, PHASE_QUERY_OFFSET + phase, iteration);
+                let rows = q.draw(&mut rng);
+                let v = rows.len();
+                Ok(Some(Tensor::from_vec(rows, v, &Device::Cpu)?))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// The initial weights `[1, V, J]` at query rows `query`, or at the training vertices
+    /// (`None`).
+    fn init_at(&self, query: Option<&Tensor>) -> Result<Tensor, TrainError> {
+        match (&self.query_init, query) {
+            (Some(full), Some(q)) => Ok(full.index_select(q, 0)?.unsqueeze(0)?),
+            _ => Ok(self.init.clone()),
+        }
+    }
+
     /// Skinning matrices of `frames` as `[B, J, 4, 4]`-shaped data for [`lbs`].
     fn frame_skinning(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
         let mats: Vec<Vec<Mat4>> = frames
@@ -376,10 +454,16 @@ impl Trainer {
         Ok(skinning_tensor(&mats, &Device::Cpu)?)
     }
 
-    /// The template posed with the initial weights under `skinning` (`B` frames) → `[B, V, 3]`.
-    fn initial_posing(&self, skinning: &Tensor, b: usize) -> Result<Tensor, TrainError> {
+    /// The template posed with initial weights `init` (`[1, V, J]`) under `skinning` (`B`
+    /// frames) → `[B, V, 3]`.
+    fn initial_posing(
+        &self,
+        init: &Tensor,
+        skinning: &Tensor,
+        b: usize,
+    ) -> Result<Tensor, TrainError> {
         let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
-        let init = self.init.broadcast_as((b, v, j))?.contiguous()?;
+        let init = init.broadcast_as((b, v, j))?.contiguous()?;
         Ok(lbs(&init, skinning, &self.rest)?)
     }
 
@@ -416,21 +500,29 @@ impl Trainer {
             return Ok(WarmRecord::default());
         }
         let frames = self.sample(PHASE_WARM, self.warm_done);
-        let w = self.weights(&frames)?;
+        let query = self.draw_queries(PHASE_WARM, self.warm_done)?;
+        let w = self.weights_at(&frames, query.as_ref())?;
+        let init = self.init_at(query.as_ref())?;
         let v = self.data.template.vertex_count();
         let b = frames.len();
         let cross = (w
             .clamp(1e-12, 1.0)?
             .log()?
-            .broadcast_mul(&self.init)?
+            .broadcast_mul(&init)?
             .sum_all()?
             / (-((b * v) as f64)))?;
+        let init_entropy = if query.is_some() {
+            mean_neg_entropy(&init.flatten_all()?.to_vec1::<f32>()?, v)
+        } else {
+            self.init_entropy
+        };
         let skinning = self.frame_skinning(&frames)?;
-        let offset = (lbs(&w, &skinning, &self.rest)? - self.initial_posing(&skinning, b)?)?;
+        let offset =
+            (lbs(&w, &skinning, &self.rest)? - self.initial_posing(&init, &skinning, b)?)?;
         // m² → cm².
         let position = (offset.sqr()?.sum_all()? * (1e4 / (b * v) as f64))?;
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
-        let kl = f64::from(cross.to_vec0::<f32>()?) + self.init_entropy;
+        let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
         let position_cm2 = f64::from(position.to_vec0::<f32>()?);
         self.optimiser.backward_step(&total)?;
         self.warm_done += 1;
@@ -461,7 +553,8 @@ impl Trainer {
         };
         self.optimiser.set_lr(self.config.adam.lr * scale);
         let frames = self.sample(PHASE_IMAGE, self.done);
-        let w = self.weights(&frames)?;
+        let query = self.draw_queries(PHASE_IMAGE, self.done)?;
+        let w = self.weights_at(&frames, query.as_ref())?;
         let b = frames.len();
         let skinning = self.frame_skinning(&frames)?;
         let posed = lbs(&w, &skinning, &self.rest)?;
@@ -496,7 +589,9 @@ impl Trainer {
         let lap_input = match self.config.laplacian_reference {
             LaplacianReference::Absolute => posed.clone(),
             // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
-            LaplacianReference::InitialSkinning => (&posed - self.initial_posing(&skinning, b)?)?,
+            LaplacianReference::InitialSkinning => {
+                (&posed - self.initial_posing(&self.init_at(query.as_ref())?, &skinning, b)?)?
+            }
         };
         let lap = (self.laplacian.loss(&lap_input)? / (b as f64 * v))?;
         let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;

@@ -121,6 +121,7 @@ pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
             template,
             init_weights: init,
             frames,
+            queries: None,
         },
         truth,
     )
@@ -349,4 +350,125 @@ fn image_phase_starts_a_fresh_adam_with_a_learning_rate_ramp() {
         // loose bound that a missing ramp (4× at step 1, 2× at step 2) or reset still breaks.
         assert!(moved < 3.0 * bound, "step {k} moved {moved}, lr {bound}");
     }
+}
+
+/// `scene(frames)` as the simplified template of a tube with twice the rings (y = k/20), whose
+/// even rings are the training vertices; the initial weights put the ring y = 0.45 alone on
+/// joint 1 and everything else on joint 0, so no training vertex tells where that ring goes.
+/// Returns the data and the full-resolution rows of that ring.
+pub(super) fn scene_with_queries(frames: usize) -> (TrainData, Vec<u32>) {
+    let (mut data, _) = scene(frames);
+    let (around, rings) = (12usize, 21usize);
+    let blend = |y: f32| if (y - 0.45).abs() < 0.01 { 1.0 } else { 0.0 };
+    let (mut positions, mut normals, mut init) = (Vec::new(), Vec::new(), Vec::new());
+    for r in 0..rings {
+        for a in 0..around {
+            let t = a as f32 / around as f32 * core::f32::consts::TAU;
+            let y = r as f32 / (rings - 1) as f32;
+            positions.push(Vec3::new(0.1 * t.cos(), y, 0.1 * t.sin()));
+            normals.push(Vec3::new(t.cos(), 0.0, t.sin()));
+            init.extend([1.0 - blend(y), blend(y)]);
+        }
+    }
+    let source: Vec<u32> = (0..data.template.vertex_count())
+        .map(|i| ((i / around) * 2 * around + i % around) as u32)
+        .collect();
+    for (i, &s) in source.iter().enumerate() {
+        assert_eq!(data.template.positions[i], positions[s as usize]);
+        data.init_weights[2 * i..2 * i + 2]
+            .copy_from_slice(&init[2 * s as usize..2 * s as usize + 2]);
+    }
+    data.queries = Some(queries::QueryCells::new(&positions, &normals, &init, &source).unwrap());
+    let ring = (9 * around as u32..10 * around as u32).collect();
+    (data, ring)
+}
+
+#[test]
+fn full_resolution_queries_fit_the_initial_weights_between_training_vertices() {
+    let (data, ring) = scene_with_queries(3);
+    let warm = |full_resolution_queries: bool| {
+        let cfg = TrainConfig {
+            warm_start_iterations: 150,
+            iterations: 0,
+            full_resolution_queries,
+            adam: crate::optim::AdamConfig {
+                lr: 1e-2,
+                ..Default::default()
+            },
+            ..config()
+        };
+        let mut t = Trainer::new(data.clone(), cfg, false).unwrap();
+        for _ in 0..150 {
+            t.warm_step().unwrap();
+        }
+        // SkinNet at the ring y = 0.45, which only the full-resolution queries see.
+        let q = Tensor::from_vec(ring.clone(), ring.len(), &Device::Cpu).unwrap();
+        let w = t
+            .weights_at(&[0], Some(&q))
+            .unwrap()
+            .to_vec3::<f32>()
+            .unwrap();
+        w[0].iter().map(|row| (1.0 - row[1]).abs()).sum::<f32>() / ring.len() as f32
+    };
+    let (with, without) = (warm(true), warm(false));
+    assert!(
+        with < 0.1 && with < 0.4 * without,
+        "mean |w − w_init| at y = 0.45: {with} with queries, {without} without"
+    );
+}
+
+#[test]
+fn query_cells_switched_off_train_exactly_as_without_them() {
+    let (data, _) = scene_with_queries(3);
+    let plain = TrainData {
+        queries: None,
+        ..data.clone()
+    };
+    let off = TrainConfig {
+        full_resolution_queries: false,
+        ..config()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut a = Trainer::new(data, off.clone(), false).unwrap();
+    a.run(&dir.path().join("a"), false).unwrap();
+    let mut b = Trainer::new(plain, off, false).unwrap();
+    b.run(&dir.path().join("b"), false).unwrap();
+    assert_eq!(outputs(&a), outputs(&b));
+}
+
+#[test]
+fn query_draws_are_seeded_per_iteration_and_resume_exactly() {
+    let (data, _) = scene_with_queries(3);
+    let t = Trainer::new(data.clone(), config(), false).unwrap();
+    let rows = |t: &Trainer, phase, it| {
+        t.draw_queries(phase, it)
+            .unwrap()
+            .unwrap()
+            .to_vec1::<u32>()
+            .unwrap()
+    };
+    assert_eq!(rows(&t, PHASE_IMAGE, 3), rows(&t, PHASE_IMAGE, 3));
+    assert_ne!(rows(&t, PHASE_IMAGE, 3), rows(&t, PHASE_IMAGE, 4));
+    assert_ne!(rows(&t, PHASE_IMAGE, 3), rows(&t, PHASE_WARM, 3));
+    let q = data.queries.as_ref().unwrap();
+    for (i, r) in rows(&t, PHASE_WARM, 0).iter().enumerate() {
+        assert!(q.cell(i).contains(r));
+    }
+    // A run interrupted after its checkpoint and resumed ends where an uninterrupted one does.
+    let dir = tempfile::tempdir().unwrap();
+    let mut a = Trainer::new(data.clone(), config(), false).unwrap();
+    a.run(&dir.path().join("a"), false).unwrap();
+    let c_dir = dir.path().join("c");
+    let short = TrainConfig {
+        iterations: 2,
+        ..config()
+    };
+    Trainer::new(data.clone(), short, false)
+        .unwrap()
+        .run(&c_dir, false)
+        .unwrap();
+    let mut d = Trainer::new(data, config(), false).unwrap();
+    d.resume(&c_dir.join("checkpoint.safetensors")).unwrap();
+    d.run(&c_dir, false).unwrap();
+    assert_eq!(outputs(&a), outputs(&d));
 }

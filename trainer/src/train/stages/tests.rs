@@ -2,7 +2,7 @@ use glam::Vec3;
 
 use super::*;
 use crate::skinnet::encode_positions;
-use crate::train::tests::{config, scene};
+use crate::train::tests::{config, scene, scene_with_queries};
 use crate::train::{TrainConfig, TrainData};
 
 /// Albedo of the tube: bands along its length and around it (smooth, so images have gradients).
@@ -76,6 +76,21 @@ fn rows(dir: &Path, stage: &str) -> Vec<(f64, f64)> {
             (v[2], v[3])
         })
         .collect()
+}
+
+/// With full-resolution query cells SkinNet is queried elsewhere, but the appearance nets
+/// colour the training vertices the rendering loss rasterises: they read the training
+/// template's own encoded positions.
+#[test]
+fn appearance_reads_the_training_vertices_with_query_cells() {
+    let (data, _) = scene_with_queries(1);
+    let t = Trainer::new(data.clone(), config(), false).unwrap();
+    let config = t.net().unwrap().config();
+    let expected = encode_positions(config, &data.template.positions, &Device::Cpu).unwrap();
+    assert_eq!(
+        t.encoded().unwrap().to_vec2::<f32>().unwrap(),
+        expected.to_vec2::<f32>().unwrap()
+    );
 }
 
 #[test]
