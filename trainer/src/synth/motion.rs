@@ -222,39 +222,29 @@ pub fn library(
             pose,
         })
     };
-    let mut out = Vec::new();
     let clips_of = |split: Split| (0..CLIPS.len()).filter(move |&c| CLIPS[c].1 == split);
-    for c in clips_of(Split::Train) {
-        for i in 0..train_frames {
-            // Phases sample the clip's cycle without repeating its first frame at the end.
-            out.push(sample(
-                c,
-                (i as f32 + 0.5) / train_frames as f32,
-                Split::Train,
-            )?);
-        }
-    }
-    match test_motions {
-        TestMotions::Novel => {
-            for c in clips_of(Split::Test) {
-                for i in 0..test_frames {
-                    out.push(sample(
-                        c,
-                        (i as f32 + 0.5) / test_frames as f32,
-                        Split::Test,
-                    )?);
-                }
-            }
-        }
-        TestMotions::HeldOutPhases => {
-            for c in clips_of(Split::Train) {
-                for i in 0..test_frames {
-                    // Training phase k sits at (k + ½)/T; (k + 1)/T is midway to the next.
-                    // Distinct while `test_frames ≤ train_frames` (checked by the config).
-                    let k = i * train_frames / test_frames;
-                    let s = (k + 1) as f32 / train_frames as f32;
-                    out.push(sample(c, s, Split::Test)?);
-                }
+    // Phases sample a clip's cycle without repeating its first frame at the end.
+    let spread = |i: usize, n: usize| (i as f32 + 0.5) / n as f32;
+    // Training phase k sits at (k + ½)/T; (k + 1)/T is midway to the next. Distinct while
+    // `test_frames ≤ train_frames` (checked by the config).
+    let between = |i: usize, n: usize| (i * train_frames / n + 1) as f32 / train_frames as f32;
+    let (test_clips, test_phase): (Split, &dyn Fn(usize, usize) -> f32) = match test_motions {
+        TestMotions::Novel => (Split::Test, &spread),
+        TestMotions::HeldOutPhases => (Split::Train, &between),
+    };
+    let mut out = Vec::new();
+    for (clips, n, phase, split) in [
+        (
+            Split::Train,
+            train_frames,
+            &spread as &dyn Fn(usize, usize) -> f32,
+            Split::Train,
+        ),
+        (test_clips, test_frames, test_phase, Split::Test),
+    ] {
+        for c in clips_of(clips) {
+            for i in 0..n {
+                out.push(sample(c, phase(i, n), split)?);
             }
         }
     }

@@ -374,64 +374,29 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
 
 #[test]
 fn every_invalid_config_field_is_named() {
-    let cases: [(&str, SynthConfig); 8] = [
+    let with = |change: fn(&mut SynthConfig)| {
+        let mut c = SynthConfig::tiny();
+        change(&mut c);
+        c
+    };
+    let cases = [
         (
             "train_frames_per_clip",
-            SynthConfig {
-                train_frames_per_clip: 0,
-                ..SynthConfig::tiny()
-            },
+            with(|c| c.train_frames_per_clip = 0),
         ),
-        (
-            "cameras",
-            SynthConfig {
-                cameras: 0,
-                ..SynthConfig::tiny()
-            },
-        ),
-        (
-            "cameras",
-            SynthConfig {
-                cameras: 257,
-                ..SynthConfig::tiny()
-            },
-        ),
-        (
-            "width/height",
-            SynthConfig {
-                width: 4,
-                ..SynthConfig::tiny()
-            },
-        ),
-        (
-            "grid",
-            SynthConfig {
-                grid: 601,
-                ..SynthConfig::tiny()
-            },
-        ),
-        (
-            "target_vertices",
-            SynthConfig {
-                target_vertices: 10,
-                ..SynthConfig::tiny()
-            },
-        ),
-        (
-            "shadow_map",
-            SynthConfig {
-                shadow_map: 8,
-                ..SynthConfig::tiny()
-            },
-        ),
+        ("cameras", with(|c| c.cameras = 0)),
+        ("cameras", with(|c| c.cameras = 257)),
+        ("width/height", with(|c| c.width = 4)),
+        ("grid", with(|c| c.grid = 601)),
+        ("target_vertices", with(|c| c.target_vertices = 10)),
+        ("shadow_map", with(|c| c.shadow_map = 8)),
         (
             "test_frames_per_clip",
-            SynthConfig {
-                test_motions: TestMotions::HeldOutPhases,
-                train_frames_per_clip: 2,
-                test_frames_per_clip: 3,
-                ..SynthConfig::tiny()
-            },
+            with(|c| {
+                c.test_motions = TestMotions::HeldOutPhases;
+                c.train_frames_per_clip = 2;
+                c.test_frames_per_clip = 3;
+            }),
         ),
     ];
     assert!(SynthConfig::tiny().validate().is_ok());
