@@ -116,9 +116,14 @@ impl Adam {
             let Some(g) = grads.get(s.var.as_tensor()) else {
                 continue;
             };
+            // candle detaches the gradients of intermediate nodes but not those of variables:
+            // a variable's gradient still records the ops (and so the activations) of the step
+            // that produced it. Kept in the moments, every step's graph would stay alive
+            // through the chain m_t → m_{t−1} → …; measured on the demo, +17 MB per iteration.
+            let g = g.detach();
             let g = match c.clip {
                 Some(l) => g.clamp(-l, l)?,
-                None => g.clone(),
+                None => g,
             };
             s.m = ((&s.m * c.beta1)? + (&g * (1.0 - c.beta1))?)?;
             s.v = ((&s.v * c.beta2)? + (g.sqr()? * (1.0 - c.beta2))?)?;
@@ -208,6 +213,23 @@ mod tests {
             // not change the first component's direction, and the second is within range.
             assert!((got[0] - (2.0 - lr)).abs() < 1e-9, "{got:?}");
             assert!((got[1] - (-1.0 + lr)).abs() < 1e-9, "{got:?}");
+        }
+    }
+
+    #[test]
+    fn moments_hold_no_graph_of_past_steps() {
+        // The gradient of x² is 2x: an op on the variable, which candle leaves recorded on a
+        // variable's gradient. The moments must not keep it (and each step's graph) alive.
+        let x = var(&[0.5, -2.0]);
+        let mut opt = Adam::new(vec![("x".into(), x.clone())], AdamConfig::default()).unwrap();
+        for _ in 0..3 {
+            let loss = x.as_tensor().sqr().unwrap().sum_all().unwrap();
+            let grads = loss.backward().unwrap();
+            assert!(grads.get(x.as_tensor()).unwrap().track_op());
+            opt.step(&grads).unwrap();
+            for (name, t) in opt.state_tensors().unwrap() {
+                assert!(!t.track_op(), "`{name}` records ops");
+            }
         }
     }
 
