@@ -50,6 +50,9 @@ pub struct AblationArgs {
     /// Weight of the rendering loss in stage 4.
     #[arg(long, default_value_t = StageConfig::default().rendering_weight)]
     pub rendering_weight: f64,
+    /// Gaussian blur (pixels) of the target images inside their masks.
+    #[arg(long, default_value_t = StageConfig::default().image_blur_px)]
+    pub image_blur_px: f64,
     /// Cameras of the "fewer cameras" row.
     #[arg(long, default_value_t = 4)]
     pub ablation_cameras: usize,
@@ -104,6 +107,7 @@ pub fn run(
         pixels_per_view: args.pixels_per_view,
         views_per_frame: args.views_per_frame,
         rendering_weight: args.rendering_weight,
+        image_blur_px: args.image_blur_px,
         ..StageConfig::default()
     };
     let none = StageConfig {
@@ -150,7 +154,7 @@ pub fn run(
             cameras,
         };
         let data = train_data(capture, initial, &options)?;
-        let images = load_images(capture, &options)?;
+        let images = load_images(capture, &options, full.image_blur_px)?;
         let stage1_dir = out.join(format!("ablation-stage1-cams{cameras}"));
         let t = Instant::now();
         let mut stage1 = Trainer::new(data.clone(), base.clone(), false)?;
@@ -226,7 +230,7 @@ pub fn run(
     }
     let _ = writeln!(
         md,
-        "\nStage 1: {} warm-start + {} iterations; stage 2: {}; stage 3: {}; stage 4: {} (λ_rend {}, {} pixels × {} views per frame per iteration); {} training vertices.",
+        "\nStage 1: {} warm-start + {} iterations; stage 2: {}; stage 3: {}; stage 4: {} (λ_rend {}, {} pixels × {} views per frame per iteration, images blurred by {} px); {} training vertices.",
         base.warm_start_iterations,
         base.iterations,
         args.albedo_iterations,
@@ -235,6 +239,7 @@ pub fn run(
         args.rendering_weight,
         args.pixels_per_view,
         args.views_per_frame,
+        args.image_blur_px,
         train_vertices
     );
     println!("\n{}\n{md}", rows_to_table(&plain));

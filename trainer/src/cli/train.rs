@@ -125,7 +125,7 @@ pub fn train_skinnet(
     trainer.run(work, progress)?;
     let stages = trainer.config().stages;
     let appearance = if stages.any() {
-        let images = load_images(capture, options)?;
+        let images = load_images(capture, options, stages.image_blur_px)?;
         Some(trainer.run_stages(images, work, progress)?)
     } else {
         None

@@ -38,6 +38,9 @@ use super::silhouette::sample_distance;
 use crate::distance_transform::DistanceImage;
 use crate::raster::{Fragments, NO_TRIANGLE};
 
+mod blur;
+pub use blur::blur_within_mask;
+
 /// A captured colour image as three bilinearly sampled channels.
 #[derive(Clone, Debug)]
 pub struct RgbTarget {

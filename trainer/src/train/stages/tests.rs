@@ -14,9 +14,9 @@ fn albedo(p: Vec3) -> Vec3 {
     )
 }
 
-/// Images of the tube posed with the *truth* weights (as in `scene`), coloured by [`albedo`]
+/// Images of the tube posed with the *truth* weights (as in `scene`), coloured by `texture`
 /// of the canonical point seen at each pixel; grey background.
-fn images(data: &TrainData, truth: &[f32], grey: Option<f32>) -> Vec<Vec<RgbTarget>> {
+fn images(data: &TrainData, truth: &[f32], texture: impl Fn(Vec3) -> Vec3) -> Vec<Vec<RgbTarget>> {
     let t = &data.template;
     data.frames
         .iter()
@@ -38,11 +38,7 @@ fn images(data: &TrainData, truth: &[f32], grey: Option<f32>) -> Vec<Vec<RgbTarg
                     let canon = frags.interpolate(&t.triangles, &t.positions);
                     let rgb: Vec<Vec3> = canon
                         .iter()
-                        .map(|c| match (c, grey) {
-                            (Some(_), Some(g)) => Vec3::splat(g),
-                            (Some(c), None) => albedo(*c),
-                            (None, _) => Vec3::splat(0.5),
-                        })
+                        .map(|c| c.map_or(Vec3::splat(0.5), &texture))
                         .collect();
                     RgbTarget::new(v.camera.width as usize, v.camera.height as usize, &rgb).unwrap()
                 })
@@ -96,7 +92,7 @@ fn appearance_reads_the_training_vertices_with_query_cells() {
 #[test]
 fn albedo_stage_learns_the_texture_and_runs_are_deterministic() {
     let (data, truth) = scene(3);
-    let imgs = images(&data, &truth, None);
+    let imgs = images(&data, &truth, albedo);
     let dir = tempfile::tempdir().unwrap();
     let mut a = Trainer::new(data.clone(), stage_config(40, 0, 0), false).unwrap();
     a.run(&dir.path().join("a"), false).unwrap();
@@ -143,7 +139,7 @@ fn albedo_stage_learns_the_texture_and_runs_are_deterministic() {
 #[test]
 fn shadow_and_refine_stages_run_and_refine_moves_skinnet_with_the_rendering_term() {
     let (data, truth) = scene(3);
-    let imgs = images(&data, &truth, None);
+    let imgs = images(&data, &truth, albedo);
     let dir = tempfile::tempdir().unwrap();
     let mut t = Trainer::new(data, stage_config(5, 5, 3), false).unwrap();
     t.run(dir.path(), false).unwrap();
@@ -201,7 +197,7 @@ fn fixed_colours_come_from_the_images_and_mismatched_images_are_rejected() {
         .count();
     assert!(near > colours.len() * 2 / 5, "{near} of {}", colours.len());
     assert!(colours.iter().all(|c| c.x >= 0.2 && c.x <= 0.8));
-    let mut short = images(&data, &truth, None);
+    let mut short = images(&data, &truth, albedo);
     short.pop();
     assert!(matches!(
         t.run_stages(short, dir.path(), false),
@@ -215,12 +211,24 @@ fn stage_config_reads_from_json_and_names_bad_fields() {
     let p = dir.path().join("c.json");
     std::fs::write(
         &p,
-        r#"{"stages": {"albedo_iterations": 5, "colours": "albedo_only"}}"#,
+        r#"{"stages": {"albedo_iterations": 5, "colours": "albedo_only",
+             "image_blur_px": 1.5}}"#,
     )
     .unwrap();
     let c = TrainConfig::load(&p).unwrap();
     assert_eq!(c.stages.albedo_iterations, 5);
     assert_eq!(c.stages.colours, ColourSource::AlbedoOnly);
+    assert_eq!(c.stages.image_blur_px, 1.5);
+    for bad in ["-1", "1e9"] {
+        std::fs::write(&p, format!(r#"{{"stages": {{"image_blur_px": {bad}}}}}"#)).unwrap();
+        assert!(matches!(
+            TrainConfig::load(&p),
+            Err(crate::train::ConfigError::Field {
+                field: "stages.image_blur_px",
+                ..
+            })
+        ));
+    }
     assert!(c.stages.any() && !TrainConfig::default().stages.any());
     std::fs::write(&p, r#"{"stages": {"rendering_weight": -1}}"#).unwrap();
     assert!(matches!(
@@ -230,4 +238,61 @@ fn stage_config_reads_from_json_and_names_bad_fields() {
             ..
         })
     ));
+}
+
+/// `load_images` returns the capture's images as they are without blur, and with blur changes
+/// only the masked pixels, towards their masked neighbours ([`blur_within_mask`]).
+#[test]
+fn loaded_images_are_blurred_inside_their_masks_only() {
+    use skinfield_formats::capture::load_capture;
+    let dir = tempfile::tempdir().unwrap();
+    crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+    let capture = load_capture(dir.path()).unwrap();
+    let options = DataOptions {
+        train_vertices: 0,
+        cameras: 1,
+    };
+    let sharp = load_images(&capture, &options, 0.0).unwrap();
+    let soft = load_images(&capture, &options, 1.5).unwrap();
+    assert_eq!(sharp.len(), capture.train_frames.len());
+    assert!(sharp.iter().chain(&soft).all(|views| views.len() == 1));
+    let (f, img) = (
+        capture.train_frames[0],
+        capture.load_image(0, capture.train_frames[0]).unwrap(),
+    );
+    let mask = capture.load_mask(0, f).unwrap();
+    let (w, h) = (img.width as usize, img.height as usize);
+    let expected = blur_within_mask(w, h, &img.rgb, &mask.inside, 1.5).unwrap();
+    let uv: Vec<f32> = (0..w * h)
+        .flat_map(|p| [(p % w) as f32 + 0.5, (p / w) as f32 + 0.5])
+        .collect();
+    let uv = Tensor::from_vec(uv, (w * h, 2), &Device::Cpu).unwrap();
+    let read = |t: &RgbTarget| t.sample(&uv).unwrap().to_vec2::<f32>().unwrap();
+    let (a, b) = (read(&sharp[0][0]), read(&soft[0][0]));
+    let mut changed = 0;
+    for p in 0..w * h {
+        assert!((Vec3::from_slice(&a[p]) - img.rgb[p]).length() < 1e-6);
+        assert!((Vec3::from_slice(&b[p]) - expected[p]).length() < 1e-6);
+        if mask.inside[p] {
+            changed += usize::from(expected[p] != img.rgb[p]);
+        } else {
+            assert_eq!(expected[p], img.rgb[p]);
+        }
+    }
+    assert!(changed > 0, "the blur changed no foreground pixel");
+    // A mask of another size is a typed error naming the file, not read out of bounds.
+    let path = capture.mask_path(0, f);
+    skinfield_formats::capture::write_mask_png(&path, 3, 2, &[true; 6]).unwrap();
+    match load_images(&capture, &options, 1.5) {
+        Err(e @ DataError::Capture(_)) => {
+            let m = e.to_string();
+            assert!(
+                m.contains(&*path.to_string_lossy()) && m.contains("3×2"),
+                "{m}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    // Without blur the masks are not read.
+    assert!(load_images(&capture, &options, 0.0).is_ok());
 }
