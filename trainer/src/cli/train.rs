@@ -32,7 +32,7 @@ pub struct Args {
     /// Folder for losses.csv and checkpoints (default: beside `--out`).
     #[arg(long)]
     pub work: Option<PathBuf>,
-    /// Continue from the checkpoint in the work folder.
+    /// Continue from the checkpoints in the work folder (stage 1, then stages 2–4).
     #[arg(long)]
     pub resume: bool,
     /// Training-template vertex count for SkinNet (0 = full resolution).
@@ -126,7 +126,11 @@ pub fn train_skinnet(
     let stages = trainer.config().stages;
     let appearance = if stages.any() {
         let images = load_images(capture, options, stages.image_blur_px)?;
-        Some(trainer.run_stages(images, work, progress)?)
+        Some(if resume {
+            trainer.resume_stages(images, work, progress)?
+        } else {
+            trainer.run_stages(images, work, progress)?
+        })
     } else {
         None
     };

@@ -624,68 +624,58 @@ impl Trainer {
 
     /// Writes parameters, optimiser state and progress to `path` (safetensors, atomically).
     pub fn save_checkpoint(&self, path: &Path) -> Result<(), TrainError> {
-        let mut tensors: HashMap<String, Tensor> = self.optimiser.state_tensors()?;
-        let vars = self
-            .varmap
-            .data()
-            .lock()
-            .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
-        for (k, v) in vars.iter() {
-            tensors.insert(format!("param.{k}"), v.as_tensor().clone());
-        }
-        let p = [self.warm_done, self.done]
-            .map(|x| [(x & 0xffff_ffff) as u32, (x >> 32) as u32])
-            .concat();
-        tensors.insert("progress".into(), Tensor::new(p.as_slice(), &Device::Cpu)?);
-        let tmp = path.with_extension("tmp");
-        candle_core::safetensors::save(&tensors, &tmp)?;
-        std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
-            path: path.to_owned(),
-            source,
-        })
+        save_tensors(&self.checkpoint_tensors("")?, path)
+    }
+
+    /// Parameters (`param.NAME`), optimiser state and progress, every name prefixed by `prefix`.
+    pub(crate) fn checkpoint_tensors(
+        &self,
+        prefix: &str,
+    ) -> Result<HashMap<String, Tensor>, TrainError> {
+        let mut tensors: HashMap<String, Tensor> = self
+            .optimiser
+            .state_tensors()?
+            .into_iter()
+            .map(|(k, v)| (format!("{prefix}{k}"), v))
+            .collect();
+        insert_varmap(&mut tensors, &format!("{prefix}param."), &self.varmap)?;
+        let p = [self.warm_done, self.done].map(split_u64).concat();
+        tensors.insert(
+            format!("{prefix}progress"),
+            Tensor::new(p.as_slice(), &Device::Cpu)?,
+        );
+        Ok(tensors)
     }
 
     /// Restores a checkpoint written by [`Trainer::save_checkpoint`] for the same data, config
     /// and model kind; training then continues exactly where it stopped.
     pub fn resume(&mut self, path: &Path) -> Result<(), TrainError> {
+        let tensors = load_tensors(path)?;
+        self.restore_tensors(&tensors, "", path)
+    }
+
+    /// Restores what [`Trainer::checkpoint_tensors`] wrote under `prefix`; errors name `path`.
+    pub(crate) fn restore_tensors(
+        &mut self,
+        tensors: &HashMap<String, Tensor>,
+        prefix: &str,
+        path: &Path,
+    ) -> Result<(), TrainError> {
         let bad = |reason: String| TrainError::Checkpoint {
             path: path.to_owned(),
             reason,
         };
-        let tensors =
-            candle_core::safetensors::load(path, &Device::Cpu).map_err(|e| bad(e.to_string()))?;
-        {
-            let vars = self
-                .varmap
-                .data()
-                .lock()
-                .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
-            for (k, v) in vars.iter() {
-                let t = tensors
-                    .get(&format!("param.{k}"))
-                    .ok_or_else(|| bad(format!("parameter `{k}` is missing")))?;
-                if t.shape() != v.shape() {
-                    return Err(bad(format!(
-                        "parameter `{k}` has shape {:?}, expected {:?}",
-                        t.dims(),
-                        v.dims()
-                    )));
-                }
-                v.set(t)?;
-            }
-        }
+        restore_varmap(tensors, &format!("{prefix}param."), &self.varmap, &bad)?;
+        let state: HashMap<String, Tensor> = tensors
+            .iter()
+            .filter_map(|(k, v)| Some((k.strip_prefix(prefix)?.to_string(), v.clone())))
+            .collect();
         self.optimiser
-            .load_state_tensors(&tensors)
+            .load_state_tensors(&state)
             .map_err(|e| bad(e.to_string()))?;
-        let p = tensors
-            .get("progress")
-            .ok_or_else(|| bad("`progress` is missing".into()))?
-            .to_vec1::<u32>()?;
-        if p.len() != 4 {
-            return Err(bad("`progress` has the wrong length".into()));
-        }
-        self.warm_done = u64::from(p[0]) | (u64::from(p[1]) << 32);
-        self.done = u64::from(p[2]) | (u64::from(p[3]) << 32);
+        let p = read_u64s(tensors, &format!("{prefix}progress"), 2).map_err(bad)?;
+        self.warm_done = p[0];
+        self.done = p[1];
         Ok(())
     }
 
@@ -765,6 +755,98 @@ impl Trainer {
         bar.finish();
         Ok(())
     }
+}
+
+/// `x` as two little-endian `u32` halves (safetensors and candle have no u64 that survives
+/// every backend).
+pub(crate) fn split_u64(x: u64) -> [u32; 2] {
+    [(x & 0xffff_ffff) as u32, (x >> 32) as u32]
+}
+
+/// The `count` u64 values stored by [`split_u64`] halves under `name`.
+pub(crate) fn read_u64s(
+    tensors: &HashMap<String, Tensor>,
+    name: &str,
+    count: usize,
+) -> Result<Vec<u64>, String> {
+    let p = tensors
+        .get(name)
+        .ok_or_else(|| format!("`{name}` is missing"))?
+        .to_vec1::<u32>()
+        .map_err(|e| format!("`{name}`: {e}"))?;
+    if p.len() != 2 * count {
+        return Err(format!("`{name}` has the wrong length"));
+    }
+    Ok(p.chunks_exact(2)
+        .map(|h| u64::from(h[0]) | (u64::from(h[1]) << 32))
+        .collect())
+}
+
+/// Adds every variable `NAME` of `varmap` to `out` as `prefix + NAME`.
+pub(crate) fn insert_varmap(
+    out: &mut HashMap<String, Tensor>,
+    prefix: &str,
+    varmap: &VarMap,
+) -> Result<(), TrainError> {
+    for (k, v) in lock_vars(varmap)?.iter() {
+        out.insert(format!("{prefix}{k}"), v.as_tensor().clone());
+    }
+    Ok(())
+}
+
+/// The variables of `varmap` (locked for the caller).
+pub(crate) fn lock_vars(
+    varmap: &VarMap,
+) -> Result<std::sync::MutexGuard<'_, HashMap<String, candle_core::Var>>, TrainError> {
+    varmap
+        .data()
+        .lock()
+        .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))
+}
+
+/// Sets every variable `NAME` of `varmap` from `tensors[prefix + NAME]`, which must exist with
+/// the variable's shape (`bad` turns a reason into the caller's error).
+pub(crate) fn restore_varmap(
+    tensors: &HashMap<String, Tensor>,
+    prefix: &str,
+    varmap: &VarMap,
+    bad: &dyn Fn(String) -> TrainError,
+) -> Result<(), TrainError> {
+    for (k, v) in lock_vars(varmap)?.iter() {
+        let t = tensors
+            .get(&format!("{prefix}{k}"))
+            .ok_or_else(|| bad(format!("`{prefix}{k}` is missing")))?;
+        if t.shape() != v.shape() {
+            return Err(bad(format!(
+                "`{prefix}{k}` has shape {:?}, expected {:?}",
+                t.dims(),
+                v.dims()
+            )));
+        }
+        v.set(t)?;
+    }
+    Ok(())
+}
+
+/// Writes `tensors` to `path` atomically (a temporary file renamed over it).
+pub(crate) fn save_tensors(
+    tensors: &HashMap<String, Tensor>,
+    path: &Path,
+) -> Result<(), TrainError> {
+    let tmp = path.with_extension("tmp");
+    candle_core::safetensors::save(tensors, &tmp)?;
+    std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// Reads a safetensors checkpoint; a file that cannot be read is a [`TrainError::Checkpoint`].
+pub(crate) fn load_tensors(path: &Path) -> Result<HashMap<String, Tensor>, TrainError> {
+    candle_core::safetensors::load(path, &Device::Cpu).map_err(|e| TrainError::Checkpoint {
+        path: path.to_owned(),
+        reason: e.to_string(),
+    })
 }
 
 /// Opens a CSV log for appending after a (re)start: keeps the header and the rows of iterations

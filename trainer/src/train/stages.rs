@@ -23,8 +23,8 @@
 //!
 //! The ablations of the paper's Table 2 are [`ColourSource`]s: without ShadowNet (stage 3
 //! skipped, `c = a` in stage 4) and with fixed per-vertex colours read from the images of the
-//! first training frame instead of the appearance field. Stages 2–4 are not checkpointed: a run
-//! that stops in them restarts them from the stage-1 checkpoint.
+//! first training frame instead of the appearance field. Stages 2–4 write their own checkpoint
+//! ([`checkpoint`]); `trainer train --resume` continues from it.
 
 use std::io::Write;
 use std::path::Path;
@@ -41,8 +41,8 @@ use super::{Model, TrainError, Trainer, frame_rng};
 use crate::appearance::{Appearance, shadow_input};
 use crate::losses::lbs::{lbs, skinning_tensor};
 use crate::losses::rendering::{RgbTarget, blur_within_mask, rendering_loss, sample_visible};
-use crate::optim::Adam;
 use crate::raster::rasterize;
+use checkpoint::{STAGES_CHECKPOINT, StageProgress, StageState};
 
 /// What colours the rendering loss gives the mesh in stage 4.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -405,13 +405,38 @@ impl Trainer {
     }
 
     /// Runs stages 2–4 of `config.stages` after stage 1 on the training frames' colour `images`
-    /// ([`load_images`]), appending `stage,iteration,rendering,total` rows to `dir/stages.csv`.
-    /// Returns the appearance nets (untrained where their stage did not run).
+    /// ([`load_images`]), writing `stage,iteration,rendering,total` rows to `dir/stages.csv`
+    /// and a checkpoint to `dir/stages.safetensors` every `checkpoint_every` iterations and at
+    /// the end of each stage ([`checkpoint`]). Returns the appearance nets (untrained where their
+    /// stage did not run).
     pub fn run_stages(
         &mut self,
         images: Vec<Vec<RgbTarget>>,
         dir: &Path,
         progress: bool,
+    ) -> Result<Appearance, TrainError> {
+        self.stages_from(images, dir, progress, false)
+    }
+
+    /// [`Trainer::run_stages`] continued from `dir/stages.safetensors` where it exists (after
+    /// [`Trainer::resume`] and [`Trainer::run`] have finished stage 1); otherwise the same as
+    /// `run_stages`. The configuration may add iterations to the stage that ran last or to
+    /// later ones.
+    pub fn resume_stages(
+        &mut self,
+        images: Vec<Vec<RgbTarget>>,
+        dir: &Path,
+        progress: bool,
+    ) -> Result<Appearance, TrainError> {
+        self.stages_from(images, dir, progress, true)
+    }
+
+    fn stages_from(
+        &mut self,
+        images: Vec<Vec<RgbTarget>>,
+        dir: &Path,
+        progress: bool,
+        resume: bool,
     ) -> Result<Appearance, TrainError> {
         let config = self.config.stages;
         if images.len() != self.data.frames.len()
@@ -435,9 +460,14 @@ impl Trainer {
             source,
         };
         std::fs::create_dir_all(dir).map_err(io)?;
-        let mut csv = std::fs::File::create(dir.join("stages.csv")).map_err(io)?;
-        writeln!(csv, "stage,iteration,rendering,total").map_err(io)?;
-        let bar = |n: u64, name: &str| {
+        let ckpt = dir.join(STAGES_CHECKPOINT);
+        let mut state = if resume && ckpt.exists() {
+            self.load_stages(&ckpt, &appearance)?
+        } else {
+            StageState::default()
+        };
+        let mut csv = reopen_stage_log(&dir.join("stages.csv"), state.progress, self.done)?;
+        let bar = |n: u64, done: u64, name: &str| {
             let b = if progress {
                 indicatif::ProgressBar::new(n)
             } else {
@@ -450,12 +480,14 @@ impl Trainer {
                 )
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
             );
+            b.set_position(done.min(n));
             b
         };
         let adam = crate::optim::AdamConfig {
             lr: config.appearance_lr,
             ..self.config.adam
         };
+        let every = self.config.checkpoint_every;
         let use_shadow = config.colours == ColourSource::Field;
         let use_nets = config.colours != ColourSource::FixedVertexColours;
         for (stage, iterations, phase) in [
@@ -478,14 +510,35 @@ impl Trainer {
                 PHASE_SHADOW,
             ),
         ] {
+            let done = |s: &StageState| {
+                if stage == 2 {
+                    s.progress.albedo
+                } else {
+                    s.progress.shadow
+                }
+            };
+            if done(&state) >= iterations {
+                continue;
+            }
             let vars = if stage == 2 {
                 appearance.albedo_vars()
             } else {
                 appearance.shadow_vars()
             };
-            let mut optimiser = Adam::from_varmap(vars, adam)?;
-            let b = bar(iterations, if stage == 2 { "albedo" } else { "shadow" });
-            for it in 0..iterations {
+            let mut optimiser = checkpoint::stage_optimiser(
+                vars,
+                adam,
+                stage,
+                done(&state),
+                &state.appearance_optimiser,
+                &ckpt,
+            )?;
+            let b = bar(
+                iterations,
+                done(&state),
+                if stage == 2 { "albedo" } else { "shadow" },
+            );
+            for it in done(&state)..iterations {
                 let frames = self.sample(phase, it);
                 let posed = self.posed(&frames)?.detach();
                 let colouring = if stage == 2 {
@@ -498,30 +551,39 @@ impl Trainer {
                 let value = f64::from(loss.to_vec0::<f32>()?);
                 writeln!(csv, "{stage},{},{value:.6e},{value:.6e}", it + 1).map_err(io)?;
                 optimiser.backward_step(&loss)?;
+                if stage == 2 {
+                    state.progress.albedo = it + 1;
+                } else {
+                    state.progress.shadow = it + 1;
+                }
                 b.set_message(format!("L_rend {value:.4}"));
                 b.inc(1);
+                if (every > 0 && (it + 1).is_multiple_of(every)) || it + 1 == iterations {
+                    csv.flush().map_err(io)?;
+                    state.appearance_optimiser = Some((stage, optimiser.state_tensors()?));
+                    self.save_stages(&ckpt, &appearance, &state)?;
+                }
             }
             b.finish();
         }
-        if config.refine_iterations > 0 {
-            let fixed = if use_nets {
-                None
-            } else {
+        if state.progress.refine < config.refine_iterations {
+            if !use_nets && state.fixed.is_none() {
                 let c = self.canonical_vertex_colours(&images)?;
                 let flat: Vec<f32> = c.iter().flat_map(|v| v.to_array()).collect();
-                Some(Tensor::from_vec(flat, (c.len(), 3), &Device::Cpu)?)
-            };
+                state.fixed = Some(Tensor::from_vec(flat, (c.len(), 3), &Device::Cpu)?);
+            }
             self.rendering = Some(RenderingTerm {
                 images,
                 appearance: appearance.clone(),
-                fixed,
+                fixed: state.fixed.clone(),
                 config,
                 last: 0.0,
             });
-            let b = bar(config.refine_iterations, "refine");
+            let b = bar(config.refine_iterations, state.progress.refine, "refine");
             let result = (|| -> Result<(), TrainError> {
-                for _ in 0..config.refine_iterations {
+                while state.progress.refine < config.refine_iterations {
                     let r = self.step()?;
+                    state.progress.refine += 1;
                     let l = self.rendering.as_ref().map_or(0.0, |t| t.last);
                     writeln!(csv, "4,{},{l:.6e},{:.6e}", r.iteration, r.total).map_err(io)?;
                     b.set_message(format!(
@@ -529,6 +591,11 @@ impl Trainer {
                         r.total, r.silhouette_boundary, r.silhouette_contour
                     ));
                     b.inc(1);
+                    let n = state.progress.refine;
+                    if (every > 0 && n.is_multiple_of(every)) || n == config.refine_iterations {
+                        csv.flush().map_err(io)?;
+                        self.save_stages(&ckpt, &appearance, &state)?;
+                    }
                 }
                 Ok(())
             })();
@@ -541,5 +608,42 @@ impl Trainer {
     }
 }
 
+/// Opens `stages.csv` for a (re)start: keeps the header and the rows of the iterations in
+/// `done` (stage-4 rows are numbered by SkinNet's image iteration, `skin_done` after the
+/// restore) and drops rows a crash logged after the last checkpoint.
+fn reopen_stage_log(
+    path: &Path,
+    done: StageProgress,
+    skin_done: u64,
+) -> Result<std::fs::File, TrainError> {
+    let io = |source| TrainError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let mut kept = vec!["stage,iteration,rendering,total".to_string()];
+    if done != StageProgress::default()
+        && let Ok(text) = std::fs::read_to_string(path)
+    {
+        kept.extend(
+            text.lines()
+                .skip(1)
+                .filter(|l| {
+                    let mut f = l.split(',').map(|x| x.parse::<u64>().ok());
+                    match (f.next().flatten(), f.next().flatten()) {
+                        (Some(2), Some(i)) => i <= done.albedo,
+                        (Some(3), Some(i)) => i <= done.shadow,
+                        (Some(4), Some(i)) => i <= skin_done,
+                        _ => false,
+                    }
+                })
+                .map(str::to_string),
+        );
+    }
+    let mut file = std::fs::File::create(path).map_err(io)?;
+    writeln!(file, "{}", kept.join("\n")).map_err(io)?;
+    Ok(file)
+}
+
+pub mod checkpoint;
 #[cfg(test)]
 mod tests;

@@ -296,3 +296,130 @@ fn loaded_images_are_blurred_inside_their_masks_only() {
     // Without blur the masks are not read.
     assert!(load_images(&capture, &options, 0.0).is_ok());
 }
+
+/// Runs stages 1–4 in `dir` with `stages` iterations, resuming whatever `dir` holds; returns
+/// the trainer and its appearance.
+fn run_to(
+    data: &TrainData,
+    imgs: &[Vec<RgbTarget>],
+    dir: &Path,
+    (albedo, shadow, refine): (u64, u64, u64),
+    colours: ColourSource,
+) -> (Trainer, Appearance) {
+    let mut config = stage_config(albedo, shadow, refine);
+    config.stages.colours = colours;
+    config.checkpoint_every = 3;
+    let mut t = Trainer::new(data.clone(), config, false).unwrap();
+    let ckpt = dir.join("checkpoint.safetensors");
+    if ckpt.exists() {
+        t.resume(&ckpt).unwrap();
+    }
+    t.run(dir, false).unwrap();
+    let app = t.resume_stages(imgs.to_vec(), dir, false).unwrap();
+    (t, app)
+}
+
+/// A run stopped inside stage 2, inside stage 3 and inside stage 4 and resumed each time ends
+/// exactly where an uninterrupted one does: same log, same SkinNet, same appearance.
+#[test]
+fn stages_resume_exactly_after_stops_in_each_stage() {
+    let (data, truth) = scene(3);
+    let imgs = images(&data, &truth, albedo);
+    let dir = tempfile::tempdir().unwrap();
+    let (a, a_app) = run_to(
+        &data,
+        &imgs,
+        &dir.path().join("a"),
+        (5, 5, 4),
+        ColourSource::Field,
+    );
+    let b_dir = dir.path().join("b");
+    for stop in [(2, 0, 0), (5, 4, 0), (5, 5, 2), (5, 5, 4)] {
+        run_to(&data, &imgs, &b_dir, stop, ColourSource::Field);
+    }
+    let (b, b_app) = run_to(&data, &imgs, &b_dir, (5, 5, 4), ColourSource::Field);
+    let log = |d: &Path| std::fs::read_to_string(d.join("stages.csv")).unwrap();
+    assert_eq!(log(&dir.path().join("a")), log(&b_dir));
+    assert_eq!(log(&b_dir).lines().count(), 1 + 5 + 5 + 4);
+    assert_eq!(
+        a.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap(),
+        b.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap()
+    );
+    let enc = a.encoded().unwrap();
+    assert_eq!(
+        a_app.albedo(enc).unwrap().to_vec2::<f32>().unwrap(),
+        b_app.albedo(enc).unwrap().to_vec2::<f32>().unwrap()
+    );
+    assert_eq!(b.progress().1, 4 + 4);
+    // Without `resume_stages` the same folder starts stages 2–4 over.
+    let mut c = Trainer::new(data.clone(), stage_config(1, 0, 0), false).unwrap();
+    c.run(&dir.path().join("c"), false).unwrap();
+    c.run_stages(imgs.clone(), &b_dir, false).unwrap();
+    assert_eq!(log(&b_dir).lines().count(), 2);
+}
+
+/// Fixed vertex colours are part of the checkpoint: they were read through the SkinNet of stage
+/// 4's first iteration, which a resumed stage 4 no longer has.
+#[test]
+fn fixed_colour_stage_resumes_exactly() {
+    let (data, truth) = scene(3);
+    let imgs = images(&data, &truth, albedo);
+    let dir = tempfile::tempdir().unwrap();
+    let fixed = ColourSource::FixedVertexColours;
+    let (a, _) = run_to(&data, &imgs, &dir.path().join("a"), (0, 0, 4), fixed);
+    run_to(&data, &imgs, &dir.path().join("b"), (0, 0, 1), fixed);
+    let (b, _) = run_to(&data, &imgs, &dir.path().join("b"), (0, 0, 4), fixed);
+    assert_eq!(
+        a.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap(),
+        b.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap()
+    );
+}
+
+/// A checkpoint that does not fit is a typed error naming the file: unreadable bytes, a stage
+/// resumed after a later one started, and SkinNet progress that disagrees with stage 4's.
+#[test]
+fn unusable_stage_checkpoints_are_named_errors() {
+    let (data, truth) = scene(3);
+    let imgs = images(&data, &truth, albedo);
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().join("a");
+    run_to(&data, &imgs, &d, (2, 2, 0), ColourSource::Field);
+    let ckpt = d.join(checkpoint::STAGES_CHECKPOINT);
+    let resume = |stages: (u64, u64, u64)| {
+        let mut t = Trainer::new(
+            data.clone(),
+            stage_config(stages.0, stages.1, stages.2),
+            false,
+        )
+        .unwrap();
+        t.resume(&d.join("checkpoint.safetensors")).unwrap();
+        t.resume_stages(imgs.clone(), &d, false)
+    };
+    // Stage 3 has started: stage 2 cannot grow.
+    match resume((4, 2, 0)) {
+        Err(TrainError::Checkpoint { path, reason }) => {
+            assert_eq!(path, ckpt);
+            assert!(reason.contains("stage 3 has started"), "{reason}");
+        }
+        other => panic!("{:?}", other.err()),
+    }
+    // Stage-4 progress that SkinNet's own progress in the file contradicts.
+    let good = std::fs::read(&ckpt).unwrap();
+    let mut tensors = candle_core::safetensors::load(&ckpt, &Device::Cpu).unwrap();
+    tensors.insert(
+        "stages.progress".into(),
+        Tensor::new(&[2u32, 0, 2, 0, 1, 0], &Device::Cpu).unwrap(),
+    );
+    candle_core::safetensors::save(&tensors, &ckpt).unwrap();
+    match resume((2, 2, 2)) {
+        Err(TrainError::Checkpoint { reason, .. }) => {
+            assert!(reason.contains("image iterations"), "{reason}")
+        }
+        other => panic!("{:?}", other.err()),
+    }
+    std::fs::write(&ckpt, &good[..good.len() / 2]).unwrap();
+    assert!(matches!(
+        resume((2, 2, 0)),
+        Err(TrainError::Checkpoint { path, .. }) if path == ckpt
+    ));
+}
