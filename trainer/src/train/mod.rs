@@ -853,25 +853,28 @@ pub(crate) fn load_tensors(path: &Path) -> Result<HashMap<String, Tensor>, Train
 /// `1..=keep` already written (a crash may have logged iterations after the last checkpoint,
 /// which the resumed run writes again) and drops the rest.
 fn reopen_log(path: &Path, header: &str, keep: u64) -> Result<std::fs::File, TrainError> {
+    reopen_log_keeping(path, header, |row| {
+        row.split(',')
+            .next()
+            .and_then(|i| i.parse::<u64>().ok())
+            .is_some_and(|i| i <= keep)
+    })
+}
+
+/// Recreates the CSV log `path` with `header` and the rows of the old file for which `keep`
+/// holds (none when there is no old file), and returns it open for appending rows.
+pub(crate) fn reopen_log_keeping(
+    path: &Path,
+    header: &str,
+    keep: impl Fn(&str) -> bool,
+) -> Result<std::fs::File, TrainError> {
     let io = |source| TrainError::Io {
         path: path.to_owned(),
         source,
     };
     let mut kept = vec![header.to_string()];
-    if keep > 0
-        && let Ok(text) = std::fs::read_to_string(path)
-    {
-        kept.extend(
-            text.lines()
-                .skip(1)
-                .filter(|l| {
-                    l.split(',')
-                        .next()
-                        .and_then(|i| i.parse::<u64>().ok())
-                        .is_some_and(|i| i <= keep)
-                })
-                .map(str::to_string),
-        );
+    if let Ok(text) = std::fs::read_to_string(path) {
+        kept.extend(text.lines().skip(1).filter(|l| keep(l)).map(str::to_string));
     }
     let mut file = std::fs::File::create(path).map_err(io)?;
     writeln!(file, "{}", kept.join("\n")).map_err(io)?;

@@ -37,7 +37,7 @@ use skinfield_formats::capture::{Capture, CaptureImage};
 use skinfield_formats::mesh::area_weighted_normals;
 
 use super::data::{DataError, DataOptions};
-use super::{Model, TrainError, Trainer, frame_rng};
+use super::{Model, TrainError, Trainer, frame_rng, reopen_log_keeping};
 use crate::appearance::{Appearance, shadow_input};
 use crate::losses::lbs::{lbs, skinning_tensor};
 use crate::losses::rendering::{RgbTarget, blur_within_mask, rendering_loss, sample_visible};
@@ -103,6 +103,26 @@ impl StageConfig {
     #[must_use]
     pub fn any(&self) -> bool {
         self.albedo_iterations + self.shadow_iterations + self.refine_iterations > 0
+    }
+
+    /// The iterations each of stages 2, 3 and 4 runs: the configured counts, less the stages
+    /// that `colours` skips (no AlbedoNet with fixed vertex colours, no ShadowNet without the
+    /// full field).
+    #[must_use]
+    fn scheduled(&self) -> StageProgress {
+        StageProgress {
+            albedo: if self.colours == ColourSource::FixedVertexColours {
+                0
+            } else {
+                self.albedo_iterations
+            },
+            shadow: if self.colours == ColourSource::Field {
+                self.shadow_iterations
+            } else {
+                0
+            },
+            refine: self.refine_iterations,
+        }
     }
 
     /// Checks ranges; returns the first bad field.
@@ -488,36 +508,14 @@ impl Trainer {
             ..self.config.adam
         };
         let every = self.config.checkpoint_every;
-        let use_shadow = config.colours == ColourSource::Field;
         let use_nets = config.colours != ColourSource::FixedVertexColours;
+        let scheduled = config.scheduled();
         for (stage, iterations, phase) in [
-            (
-                2u64,
-                if use_nets {
-                    config.albedo_iterations
-                } else {
-                    0
-                },
-                PHASE_ALBEDO,
-            ),
-            (
-                3,
-                if use_shadow {
-                    config.shadow_iterations
-                } else {
-                    0
-                },
-                PHASE_SHADOW,
-            ),
+            (2u64, scheduled.albedo, PHASE_ALBEDO),
+            (3, scheduled.shadow, PHASE_SHADOW),
         ] {
-            let done = |s: &StageState| {
-                if stage == 2 {
-                    s.progress.albedo
-                } else {
-                    s.progress.shadow
-                }
-            };
-            if done(&state) >= iterations {
+            let start = *state.progress.of_appearance_stage(stage);
+            if start >= iterations {
                 continue;
             }
             let vars = if stage == 2 {
@@ -529,16 +527,16 @@ impl Trainer {
                 vars,
                 adam,
                 stage,
-                done(&state),
+                start,
                 &state.appearance_optimiser,
                 &ckpt,
             )?;
             let b = bar(
                 iterations,
-                done(&state),
+                start,
                 if stage == 2 { "albedo" } else { "shadow" },
             );
-            for it in done(&state)..iterations {
+            for it in start..iterations {
                 let frames = self.sample(phase, it);
                 let posed = self.posed(&frames)?.detach();
                 let colouring = if stage == 2 {
@@ -551,11 +549,7 @@ impl Trainer {
                 let value = f64::from(loss.to_vec0::<f32>()?);
                 writeln!(csv, "{stage},{},{value:.6e},{value:.6e}", it + 1).map_err(io)?;
                 optimiser.backward_step(&loss)?;
-                if stage == 2 {
-                    state.progress.albedo = it + 1;
-                } else {
-                    state.progress.shadow = it + 1;
-                }
+                *state.progress.of_appearance_stage(stage) = it + 1;
                 b.set_message(format!("L_rend {value:.4}"));
                 b.inc(1);
                 if (every > 0 && (it + 1).is_multiple_of(every)) || it + 1 == iterations {
@@ -610,38 +604,24 @@ impl Trainer {
 
 /// Opens `stages.csv` for a (re)start: keeps the header and the rows of the iterations in
 /// `done` (stage-4 rows are numbered by SkinNet's image iteration, `skin_done` after the
-/// restore) and drops rows a crash logged after the last checkpoint.
+/// restore) and drops rows a crash logged after the last checkpoint, or every row of an old
+/// run when nothing is resumed.
 fn reopen_stage_log(
     path: &Path,
     done: StageProgress,
     skin_done: u64,
 ) -> Result<std::fs::File, TrainError> {
-    let io = |source| TrainError::Io {
-        path: path.to_owned(),
-        source,
-    };
-    let mut kept = vec!["stage,iteration,rendering,total".to_string()];
-    if done != StageProgress::default()
-        && let Ok(text) = std::fs::read_to_string(path)
-    {
-        kept.extend(
-            text.lines()
-                .skip(1)
-                .filter(|l| {
-                    let mut f = l.split(',').map(|x| x.parse::<u64>().ok());
-                    match (f.next().flatten(), f.next().flatten()) {
-                        (Some(2), Some(i)) => i <= done.albedo,
-                        (Some(3), Some(i)) => i <= done.shadow,
-                        (Some(4), Some(i)) => i <= skin_done,
-                        _ => false,
-                    }
-                })
-                .map(str::to_string),
-        );
-    }
-    let mut file = std::fs::File::create(path).map_err(io)?;
-    writeln!(file, "{}", kept.join("\n")).map_err(io)?;
-    Ok(file)
+    let resumed = done != StageProgress::default();
+    reopen_log_keeping(path, "stage,iteration,rendering,total", |row| {
+        let mut f = row.split(',').map(|x| x.parse::<u64>().ok());
+        resumed
+            && match (f.next().flatten(), f.next().flatten()) {
+                (Some(2), Some(i)) => i <= done.albedo,
+                (Some(3), Some(i)) => i <= done.shadow,
+                (Some(4), Some(i)) => i <= skin_done,
+                _ => false,
+            }
+    })
 }
 
 pub mod checkpoint;

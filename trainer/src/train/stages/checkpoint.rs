@@ -37,6 +37,17 @@ pub(super) struct StageProgress {
     pub refine: u64,
 }
 
+impl StageProgress {
+    /// The counter of appearance stage 2 (AlbedoNet) or, for any other value, 3 (ShadowNet).
+    pub fn of_appearance_stage(&mut self, stage: u64) -> &mut u64 {
+        if stage == 2 {
+            &mut self.albedo
+        } else {
+            &mut self.shadow
+        }
+    }
+}
+
 /// What a stages checkpoint restores besides the parameters.
 #[derive(Default)]
 pub(super) struct StageState {
@@ -116,10 +127,10 @@ impl Trainer {
                 Some((stage, adam))
             }
         };
-        let c = self.config.stages;
+        let c = self.config.stages.scheduled();
         let pending = [
-            (2, progress.albedo < c.albedo_iterations),
-            (3, progress.shadow < c.shadow_iterations),
+            (2, progress.albedo < c.albedo),
+            (3, progress.shadow < c.shadow),
         ];
         let started = [(3, progress.shadow > 0), (4, progress.refine > 0)];
         for (earlier, open) in pending {
