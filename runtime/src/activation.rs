@@ -58,6 +58,18 @@ pub fn softplus(x: f32, beta: f32) -> f32 {
     x.max(0.0) + libm::log1pf(libm::expf(-beta * x.abs())) / beta
 }
 
+/// The slope of Softplus, `sigmoid(βx)` (exact, libm), evaluated from `e = exp(−β|x|)` so it
+/// neither overflows nor loses the tail: `1/(1 + e)` for `x ≥ 0`, `e/(1 + e)` below.
+#[must_use]
+pub fn softplus_slope(x: f32, beta: f32) -> f32 {
+    let e = libm::expf(-beta * x.abs());
+    if x >= 0.0 {
+        1.0 / (1.0 + e)
+    } else {
+        e / (1.0 + e)
+    }
+}
+
 /// `exp(z)` for `z ≤ 0` by the kernels' polynomial (scalar mirror of the SIMD code).
 #[must_use]
 pub fn exp_poly(z: f32) -> f32 {

@@ -149,3 +149,33 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
         }
     }
 }
+
+/// Softplus in place over `x` and its slope `sigmoid(β·x)` into `slope` (the trainer's forward
+/// pass keeps the slope for its backward pass), 16 lanes at a time; the tail goes through the
+/// scalar path.
+///
+/// # Safety
+/// The CPU must support avx512f, and `slope.len() == x.len()`.
+#[target_feature(enable = "avx512f")]
+pub(super) unsafe fn softplus_with_slope(x: &mut [f32], slope: &mut [f32], beta: f32) {
+    let n = x.len() - x.len() % 16;
+    let (b, ib) = (_mm512_set1_ps(beta), _mm512_set1_ps(1.0 / beta));
+    let (xp, sp) = (x.as_mut_ptr(), slope.as_mut_ptr());
+    for i in (0..n).step_by(16) {
+        // SAFETY: `i + 16 ≤ n ≤ x.len() = slope.len()`.
+        unsafe {
+            let x = _mm512_loadu_ps(xp.add(i));
+            let e = exp_ps(_mm512_sub_ps(
+                _mm512_setzero_ps(),
+                _mm512_mul_ps(b, _mm512_abs_ps(x)),
+            ));
+            let h = _mm512_fmadd_ps(log1p_ps(e), ib, _mm512_max_ps(x, _mm512_setzero_ps()));
+            let inv = _mm512_div_ps(_mm512_set1_ps(1.0), _mm512_add_ps(e, _mm512_set1_ps(1.0)));
+            let ge = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(x, _mm512_setzero_ps());
+            let s = _mm512_mask_blend_ps(ge, _mm512_mul_ps(e, inv), inv);
+            _mm512_storeu_ps(xp.add(i), h);
+            _mm512_storeu_ps(sp.add(i), s);
+        }
+    }
+    super::scalar::softplus_with_slope(&mut x[n..], &mut slope[n..], beta);
+}

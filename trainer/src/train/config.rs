@@ -107,6 +107,9 @@ pub struct TrainConfig {
     /// lower frequencies vary less between training vertices; the queries fix that at L = 6
     /// (0.953 cm), so the default stays.
     pub pe_frequencies: u32,
+    /// Huber width δ of both silhouette terms, in pixels ([`crate::losses::silhouette`]):
+    /// quadratic below, linear (the paper's L1) above.
+    pub silhouette_huber_px: f32,
     /// Stages 2–4 (appearance field and rendering loss); all iterations 0 by default.
     pub stages: super::stages::StageConfig,
 }
@@ -132,6 +135,7 @@ impl Default for TrainConfig {
             static_epsilon: 1e-4,
             full_resolution_queries: true,
             pe_frequencies: 6,
+            silhouette_huber_px: crate::losses::silhouette::DEFAULT_HUBER_PX,
             stages: super::stages::StageConfig::default(),
         }
     }
@@ -188,6 +192,9 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<(), &'static str> {
         if self.batch == 0 || self.batch > 64 {
             return Err("batch");
+        }
+        if !(self.silhouette_huber_px.is_finite() && self.silhouette_huber_px > 0.0) {
+            return Err("silhouette_huber_px");
         }
         if self.warm_start_batch == 0 || self.warm_start_batch > 64 {
             return Err("warm_start_batch");

@@ -20,12 +20,14 @@
 pub mod config;
 pub mod data;
 pub mod plot;
+pub mod profile;
 pub mod queries;
 pub mod stages;
 
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
@@ -39,12 +41,12 @@ use crate::geodesic::MeshGraph;
 use crate::losses::laplacian::UniformLaplacian;
 use crate::losses::lbs::{lbs, rest_homogeneous, skinning_tensor};
 use crate::losses::partwise::PartwiseReg;
-use crate::losses::projection::{in_front, project};
-use crate::losses::silhouette::{SilhouetteTarget, silhouette_terms};
+use crate::losses::silhouette::{BatchView, EdgeTable, SilhouetteLoss, SilhouetteTarget};
 use crate::losses::skinning_reg::GeodesicSkinningReg;
 use crate::optim::Adam;
 use crate::skinnet::{PREFIX, SkinNet, encode_positions, softmax_last};
 pub use config::{ConfigError, LaplacianReference, LossWeights, TrainConfig};
+use profile::{IterationKind, Phase, StepProfile, Timer};
 
 /// One camera view of a training frame.
 #[derive(Clone, Debug)]
@@ -196,6 +198,12 @@ pub struct Trainer {
     /// `Σ_ij w_init ln w_init / V`, the constant that turns the warm start's cross-entropy into
     /// a KL divergence.
     init_entropy: f64,
+    /// Time per phase of the iterations run so far.
+    profile: StepProfile,
+    /// The training template's edges (silhouette edges are found among them every view).
+    edges: Arc<EdgeTable>,
+    /// The training template's triangles, shared with the silhouette op.
+    triangles: Arc<[[u32; 3]]>,
 }
 
 /// Frame-sampling stream of the warm start (its batches have `warm_start_batch` frames).
@@ -313,6 +321,8 @@ impl Trainer {
             &dev,
         )?;
         let laplacian = UniformLaplacian::new(&t.positions, &t.triangles, &dev)?;
+        let edges = Arc::new(EdgeTable::new(v, &t.triangles));
+        let triangles: Arc<[[u32; 3]]> = t.triangles.clone().into();
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
         let init_entropy = mean_neg_entropy(&data.init_weights, v);
@@ -349,7 +359,16 @@ impl Trainer {
             init,
             query_init,
             init_entropy,
+            profile: StepProfile::default(),
+            edges,
+            triangles,
         })
+    }
+
+    /// Where the iterations run so far spent their time ([`profile`]).
+    #[must_use]
+    pub fn profile(&self) -> &StepProfile {
+        &self.profile
     }
 
     /// The network (`None` for the static baseline).
@@ -499,9 +518,12 @@ impl Trainer {
             self.warm_done += 1;
             return Ok(WarmRecord::default());
         }
+        const KIND: IterationKind = IterationKind::Warm;
+        let mut timer = Timer::start();
         let frames = self.sample(PHASE_WARM, self.warm_done);
         let query = self.draw_queries(PHASE_WARM, self.warm_done)?;
         let w = self.weights_at(&frames, query.as_ref())?;
+        timer.lap(&mut self.profile, KIND, Phase::Forward);
         let init = self.init_at(query.as_ref())?;
         let v = self.data.template.vertex_count();
         let b = frames.len();
@@ -516,6 +538,7 @@ impl Trainer {
         } else {
             self.init_entropy
         };
+        timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         let skinning = self.frame_skinning(&frames)?;
         let offset =
             (lbs(&w, &skinning, &self.rest)? - self.initial_posing(&init, &skinning, b)?)?;
@@ -524,7 +547,12 @@ impl Trainer {
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
         let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
         let position_cm2 = f64::from(position.to_vec0::<f32>()?);
-        self.optimiser.backward_step(&total)?;
+        timer.lap(&mut self.profile, KIND, Phase::Skinning);
+        let grads = total.backward()?;
+        timer.lap(&mut self.profile, KIND, Phase::Backward);
+        self.optimiser.step(&grads)?;
+        timer.lap(&mut self.profile, KIND, Phase::Optimiser);
+        self.profile.finish_iteration(KIND);
         self.warm_done += 1;
         Ok(WarmRecord {
             iteration: self.warm_done,
@@ -552,39 +580,38 @@ impl Trainer {
             ((self.done + 1) as f64 / ramp as f64).min(1.0)
         };
         self.optimiser.set_lr(self.config.adam.lr * scale);
+        const KIND: IterationKind = IterationKind::Image;
+        let mut timer = Timer::start();
         let frames = self.sample(PHASE_IMAGE, self.done);
         let query = self.draw_queries(PHASE_IMAGE, self.done)?;
         let w = self.weights_at(&frames, query.as_ref())?;
+        timer.lap(&mut self.profile, KIND, Phase::Forward);
         let b = frames.len();
         let skinning = self.frame_skinning(&frames)?;
         let posed = lbs(&w, &skinning, &self.rest)?;
-        let posed_values = posed.to_vec3::<f32>()?;
-        let mut boundary = Vec::new();
-        let mut contour = Vec::new();
-        for (k, &f) in frames.iter().enumerate() {
-            let xk = posed.get(k)?;
-            let pts: Vec<glam::Vec3> = posed_values[k]
-                .iter()
-                .map(|p| glam::Vec3::new(p[0], p[1], p[2]))
-                .collect();
-            for view in &self.data.frames[f].views {
-                let uv = project(&view.camera, &xk)?;
-                let valid = in_front(&view.camera, &pts);
-                let t = silhouette_terms(&view.target, &uv, &valid, &self.data.template.triangles)?;
-                boundary.push((t.boundary / t.boundary_count.max(1) as f64)?);
-                contour.push((t.contour / t.contour_count.max(1) as f64)?);
-            }
-        }
-        let mean = |ts: Vec<Tensor>| -> Result<Tensor, TrainError> {
-            let n = ts.len().max(1) as f64;
-            Ok(if ts.is_empty() {
-                Tensor::zeros((), DType::F32, &Device::Cpu)?
-            } else {
-                (Tensor::stack(&ts, 0)?.sum_all()? / n)?
+        timer.lap(&mut self.profile, KIND, Phase::Skinning);
+        let views: Vec<BatchView> = frames
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &f)| {
+                self.data.frames[f].views.iter().map(move |view| BatchView {
+                    frame: k,
+                    camera: view.camera.clone(),
+                    target: view.target.clone(),
+                })
             })
-        };
-        let sb = mean(boundary)?;
-        let sc = mean(contour)?;
+            .collect();
+        let silhouette = SilhouetteLoss::new(
+            views,
+            self.triangles.clone(),
+            self.edges.clone(),
+            self.config.silhouette_huber_px,
+        )
+        .apply(&posed)?;
+        let sb = silhouette.get(0)?;
+        let sc = silhouette.get(1)?;
+        let (sb_px, sc_px) = (silhouette.get(2)?, silhouette.get(3)?);
+        timer.lap(&mut self.profile, KIND, Phase::Silhouette);
         let v = self.data.template.vertex_count() as f64;
         let lap_input = match self.config.laplacian_reference {
             LaplacianReference::Absolute => posed.clone(),
@@ -605,20 +632,26 @@ impl Trainer {
             (&part * lw.partwise)?,
         ];
         let mut terms = terms.to_vec();
+        timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         terms.extend(self.rendering_term(&frames, &posed)?);
+        timer.lap(&mut self.profile, KIND, Phase::Rendering);
         let total = Tensor::stack(&terms, 0)?.sum_all()?;
         let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
         self.done += 1;
         let record = LossRecord {
             iteration: self.done,
             total: val(&total)?,
-            silhouette_boundary: val(&sb)?,
-            silhouette_contour: val(&sc)?,
+            silhouette_boundary: val(&sb_px)?,
+            silhouette_contour: val(&sc_px)?,
             laplacian: val(&lap)?,
             skinning: val(&skin)?,
             partwise: val(&part)?,
         };
-        self.optimiser.backward_step(&total)?;
+        let grads = total.backward()?;
+        timer.lap(&mut self.profile, KIND, Phase::Backward);
+        self.optimiser.step(&grads)?;
+        timer.lap(&mut self.profile, KIND, Phase::Optimiser);
+        self.profile.finish_iteration(KIND);
         Ok(record)
     }
 
@@ -752,6 +785,8 @@ impl Trainer {
         }
         csv.flush().map_err(io(&csv_path))?;
         self.save_checkpoint(&ckpt)?;
+        let profile_path = dir.join("profile.csv");
+        std::fs::write(&profile_path, self.profile.csv()).map_err(io(&profile_path))?;
         bar.finish();
         Ok(())
     }

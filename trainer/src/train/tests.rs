@@ -1,5 +1,4 @@
 use super::*;
-use crate::losses::silhouette::coverage_mask;
 use glam::{Quat, Vec3};
 use skinfield_formats::math::Transform;
 use skinfield_formats::{Pose, UpAxis, pose_features};
@@ -99,12 +98,8 @@ pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
                         .truncate()
                 })
                 .collect();
-            let uv: Vec<[f32; 2]> = posed
-                .iter()
-                .map(|&p| camera.project(p).unwrap().to_array())
-                .collect();
-            let mask = coverage_mask(64, 64, &uv, &vec![true; uv.len()], &template.triangles);
-            let target = SilhouetteTarget::from_mask(64, 64, &mask).unwrap();
+            let cover = crate::raster::coverage(&camera, &posed, &template.triangles, 4);
+            let target = SilhouetteTarget::from_coverage(64, 64, &cover).unwrap();
             Frame {
                 skinning,
                 pose_features: feats,

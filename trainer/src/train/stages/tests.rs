@@ -282,7 +282,7 @@ fn loaded_images_are_blurred_inside_their_masks_only() {
     assert!(changed > 0, "the blur changed no foreground pixel");
     // A mask of another size is a typed error naming the file, not read out of bounds.
     let path = capture.mask_path(0, f);
-    skinfield_formats::capture::write_mask_png(&path, 3, 2, &[true; 6]).unwrap();
+    skinfield_formats::capture::write_mask_png(&path, 3, 2, &[1.0; 6]).unwrap();
     match load_images(&capture, &options, 1.5) {
         Err(e @ DataError::Capture(_)) => {
             let m = e.to_string();
