@@ -5,7 +5,9 @@
 use core::arch::x86_64::*;
 
 use super::{LayerArgs, MR, TILE};
-use crate::activation::{Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG2E};
+use crate::activation::{
+    Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E, SOFTPLUS_EXP_MIN,
+};
 
 /// Vectors per vertex block (16 vertices).
 const NV: usize = 2;
@@ -44,7 +46,8 @@ fn exp_ps(z: __m256) -> __m256 {
 #[target_feature(enable = "avx2,fma")]
 fn log1p_ps(y: __m256) -> __m256 {
     let s = _mm256_div_ps(y, _mm256_add_ps(y, _mm256_set1_ps(2.0)));
-    let z = _mm256_mul_ps(s, s);
+    let sc = _mm256_max_ps(s, _mm256_set1_ps(LOG1P_S_MIN));
+    let z = _mm256_mul_ps(sc, sc);
     let mut q = _mm256_set1_ps(LOG1P_Q[0]);
     for &c in &LOG1P_Q[1..] {
         q = _mm256_fmadd_ps(q, z, _mm256_set1_ps(c));
@@ -52,13 +55,23 @@ fn log1p_ps(y: __m256) -> __m256 {
     _mm256_mul_ps(_mm256_add_ps(s, s), q)
 }
 
+/// `exp(max(−β|x|, SOFTPLUS_EXP_MIN))`, Softplus's tail term.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn tail_exp(x: __m256, beta: __m256) -> __m256 {
+    exp_ps(_mm256_max_ps(
+        _mm256_sub_ps(
+            _mm256_setzero_ps(),
+            _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x)),
+        ),
+        _mm256_set1_ps(SOFTPLUS_EXP_MIN),
+    ))
+}
+
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn softplus_ps(x: __m256, beta: __m256, inv_beta: __m256) -> __m256 {
-    let e = exp_ps(_mm256_sub_ps(
-        _mm256_setzero_ps(),
-        _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x)),
-    ));
+    let e = tail_exp(x, beta);
     _mm256_fmadd_ps(log1p_ps(e), inv_beta, _mm256_max_ps(x, _mm256_setzero_ps()))
 }
 
@@ -175,10 +188,7 @@ pub(super) unsafe fn softplus_with_slope(x: &mut [f32], slope: &mut [f32], beta:
         // SAFETY: `i + 8 ≤ n ≤ x.len() = slope.len()`.
         unsafe {
             let x = _mm256_loadu_ps(xp.add(i));
-            let e = exp_ps(_mm256_sub_ps(
-                _mm256_setzero_ps(),
-                _mm256_mul_ps(b, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x)),
-            ));
+            let e = tail_exp(x, b);
             let h = _mm256_fmadd_ps(log1p_ps(e), ib, _mm256_max_ps(x, _mm256_setzero_ps()));
             let inv = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_add_ps(e, _mm256_set1_ps(1.0)));
             let ge = _mm256_cmp_ps::<_CMP_GE_OQ>(x, _mm256_setzero_ps());

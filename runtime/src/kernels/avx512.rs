@@ -5,7 +5,9 @@
 use core::arch::x86_64::*;
 
 use super::{LayerArgs, MR, TILE};
-use crate::activation::{Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG2E};
+use crate::activation::{
+    Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E, SOFTPLUS_EXP_MIN,
+};
 
 const NV: usize = TILE / 16;
 
@@ -39,7 +41,8 @@ fn exp_ps(z: __m512) -> __m512 {
 #[target_feature(enable = "avx512f")]
 fn log1p_ps(y: __m512) -> __m512 {
     let s = _mm512_div_ps(y, _mm512_add_ps(y, _mm512_set1_ps(2.0)));
-    let z = _mm512_mul_ps(s, s);
+    let sc = _mm512_max_ps(s, _mm512_set1_ps(LOG1P_S_MIN));
+    let z = _mm512_mul_ps(sc, sc);
     let mut q = _mm512_set1_ps(LOG1P_Q[0]);
     for &c in &LOG1P_Q[1..] {
         q = _mm512_fmadd_ps(q, z, _mm512_set1_ps(c));
@@ -47,13 +50,20 @@ fn log1p_ps(y: __m512) -> __m512 {
     _mm512_mul_ps(_mm512_add_ps(s, s), q)
 }
 
+/// `exp(max(−β|x|, SOFTPLUS_EXP_MIN))`, Softplus's tail term.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn tail_exp(x: __m512, beta: __m512) -> __m512 {
+    exp_ps(_mm512_max_ps(
+        _mm512_sub_ps(_mm512_setzero_ps(), _mm512_mul_ps(beta, _mm512_abs_ps(x))),
+        _mm512_set1_ps(SOFTPLUS_EXP_MIN),
+    ))
+}
+
 #[inline]
 #[target_feature(enable = "avx512f")]
 fn softplus_ps(x: __m512, beta: __m512, inv_beta: __m512) -> __m512 {
-    let e = exp_ps(_mm512_sub_ps(
-        _mm512_setzero_ps(),
-        _mm512_mul_ps(beta, _mm512_abs_ps(x)),
-    ));
+    let e = tail_exp(x, beta);
     _mm512_fmadd_ps(log1p_ps(e), inv_beta, _mm512_max_ps(x, _mm512_setzero_ps()))
 }
 
@@ -165,10 +175,7 @@ pub(super) unsafe fn softplus_with_slope(x: &mut [f32], slope: &mut [f32], beta:
         // SAFETY: `i + 16 ≤ n ≤ x.len() = slope.len()`.
         unsafe {
             let x = _mm512_loadu_ps(xp.add(i));
-            let e = exp_ps(_mm512_sub_ps(
-                _mm512_setzero_ps(),
-                _mm512_mul_ps(b, _mm512_abs_ps(x)),
-            ));
+            let e = tail_exp(x, b);
             let h = _mm512_fmadd_ps(log1p_ps(e), ib, _mm512_max_ps(x, _mm512_setzero_ps()));
             let inv = _mm512_div_ps(_mm512_set1_ps(1.0), _mm512_add_ps(e, _mm512_set1_ps(1.0)));
             let ge = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(x, _mm512_setzero_ps());

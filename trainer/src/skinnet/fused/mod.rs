@@ -107,8 +107,8 @@ impl ParamLayout {
 pub(crate) struct BufferPool(Mutex<Vec<Vec<f32>>>);
 
 impl BufferPool {
-    /// A zero-filled buffer of `len` floats, reusing a pooled allocation when one is large
-    /// enough.
+    /// A buffer of `len` floats whose contents are unspecified (the caller overwrites every
+    /// element), reusing a pooled allocation when one is large enough.
     pub(crate) fn take(&self, len: usize) -> Vec<f32> {
         let mut pool = self
             .0
@@ -124,7 +124,8 @@ impl BufferPool {
             Some(i) => pool.swap_remove(i),
             None => Vec::new(),
         };
-        buf.clear();
+        // Shrinking keeps the old values, growing adds zeros: either way no pass over memory the
+        // caller is about to overwrite.
         buf.resize(len, 0.0);
         buf
     }
@@ -164,6 +165,21 @@ impl FusedContext {
 struct FusedSkinNet {
     context: Arc<FusedContext>,
     saved: Mutex<Option<Activations>>,
+}
+
+impl Drop for FusedSkinNet {
+    /// Activations a backward pass never consumed (an evaluation-only forward) go back to the
+    /// pool rather than to the allocator.
+    fn drop(&mut self) {
+        let saved = self
+            .saved
+            .get_mut()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .take();
+        if let Some(acts) = saved {
+            self.context.pool.give(acts.into_buffers());
+        }
+    }
 }
 
 /// The contiguous f32 data of a storage, or an error naming the argument.

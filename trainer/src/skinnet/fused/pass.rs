@@ -16,6 +16,22 @@ use super::gemm::{MatMut, MatRef, matmul};
 /// Rows per parallel task of the elementwise passes.
 const CHUNK_ROWS: usize = 256;
 
+/// Activations and slopes below this (2^-40 ≈ 9e-13) are stored as zero, and gradients below
+/// this fraction of the largest output gradient are flushed to zero. Products of such values
+/// inside the matrix products are subnormal floats, which x86 cores handle in microcode at
+/// ~100 cycles each: on a net trained for a few hundred steps they made the backward pass 4×
+/// slower. What is dropped is below 1e-12 of the terms that remain.
+const FLUSH: f32 = 9.094_947e-13;
+
+/// Sets the entries of `x` smaller in magnitude than `tau` to zero.
+fn flush(x: &mut [f32], tau: f32) {
+    for v in x {
+        if v.abs() < tau {
+            *v = 0.0;
+        }
+    }
+}
+
 /// What the forward pass keeps for the backward pass.
 #[derive(Debug)]
 pub(crate) struct Activations {
@@ -39,7 +55,7 @@ impl Activations {
         &self.output
     }
 
-    fn into_buffers(self) -> impl Iterator<Item = Vec<f32>> {
+    pub(crate) fn into_buffers(self) -> impl Iterator<Item = Vec<f32>> {
         self.hidden
             .into_iter()
             .chain(self.slopes)
@@ -202,7 +218,12 @@ pub(crate) fn forward(
             let failed = z
                 .par_chunks_mut(out * CHUNK_ROWS)
                 .zip(s.par_chunks_mut(out * CHUNK_ROWS))
-                .map(|(z, s)| softplus_with_slope(ctx.kernel, z, s, beta).is_err())
+                .map(|(z, s)| {
+                    let failed = softplus_with_slope(ctx.kernel, z, s, beta).is_err();
+                    flush(z, FLUSH);
+                    flush(s, FLUSH);
+                    failed
+                })
                 .reduce(|| false, |a, b| a || b);
             if failed {
                 bail!("fused SkinNet: the Softplus kernel is unavailable");
@@ -317,6 +338,9 @@ pub(crate) fn backward(
                 }
             }
         });
+    // Gradients this far below the largest one at the output are flushed (see `FLUSH`).
+    let tau = FLUSH * dz.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+    flush(&mut dz, tau);
     let mut dparams = vec![0.0f32; ctx.layout.len()];
     let mut dw = Vec::new();
     for i in (0..n).rev() {
@@ -380,6 +404,7 @@ pub(crate) fn backward(
                     for (d, s) in d.iter_mut().zip(s) {
                         *d *= s;
                     }
+                    flush(d, tau);
                 });
             ctx.pool.give([std::mem::replace(&mut dz, dh)]);
         }
