@@ -17,6 +17,7 @@
 //! generator seeded by `(seed, iteration)`, so a
 //! resumed run draws the same batches as an uninterrupted one.
 
+pub mod average;
 pub mod config;
 pub mod data;
 pub mod plot;
@@ -158,9 +159,24 @@ pub struct WarmRecord {
     pub iteration: u64,
     /// `KL(w_init ‖ w)` per vertex.
     pub kl: f64,
-    /// Mean squared distance (cm²) between the vertices skinned with SkinNet's and with the
-    /// initial weights.
+    /// Mean squared distance (cm², for metre-scaled templates) between the vertices skinned
+    /// with SkinNet's and with the initial weights.
     pub position_cm2: f64,
+    /// The root mean square of that distance over the template's bounding-box diagonal.
+    pub position_relative: f64,
+}
+
+/// Where the warm start stands.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WarmStatus {
+    /// Iterations run.
+    pub iterations: u64,
+    /// Whether the convergence test passed (then no more iterations run).
+    pub converged: bool,
+    /// `KL(w_init ‖ w)` per vertex, averaged over the last window.
+    pub kl: f64,
+    /// Relative root-mean-square position error, averaged over the last window.
+    pub position_relative: f64,
 }
 
 /// What is being optimised.
@@ -204,6 +220,16 @@ pub struct Trainer {
     edges: Arc<EdgeTable>,
     /// The training template's triangles, shared with the silhouette op.
     triangles: Arc<[[u32; 3]]>,
+    /// With [`TrainConfig::consistent_queries`]: the full-resolution rest positions `[N, 4]`.
+    query_rest: Option<Tensor>,
+    /// The running average of the parameters over the image iterations.
+    average: Option<average::ParameterAverage>,
+    /// The last `warm_start_window` warm-start `(KL, relative position error)` pairs.
+    warm_window: std::collections::VecDeque<(f64, f64)>,
+    /// Whether the warm start has converged.
+    warm_converged: bool,
+    /// The template's bounding-box diagonal (the warm start's position scale).
+    diagonal: f64,
 }
 
 /// Frame-sampling stream of the warm start (its batches have `warm_start_batch` frames).
@@ -266,7 +292,11 @@ impl Trainer {
         let bounds = t
             .bounds()
             .ok_or_else(|| TrainError::Data("template has no bounds".into()))?;
-        let (lo, hi) = (bounds.min, bounds.max);
+        let (mut lo, mut hi) = (bounds.min, bounds.max);
+        if config.cubic_normalisation {
+            let (centre, half) = ((lo + hi) * 0.5, (hi - lo).max_element() * 0.5);
+            (lo, hi) = (centre - half, centre + half);
+        }
         // A margin so points slightly outside the template (other resolutions) stay in [−1, 1].
         let pad = (hi - lo).max_element() * 0.05;
         let mc = ModelConfig {
@@ -342,7 +372,13 @@ impl Trainer {
             }
             _ => None,
         };
-        let optimiser = Adam::from_varmap(&varmap, config.adam)?;
+        let optimiser = Adam::from_varmap(&varmap, Self::adam_config(&config, static_weights))?;
+        let query_rest = match &data.queries {
+            Some(q) if config.consistent_queries && !static_weights => {
+                Some(rest_homogeneous(&q.positions, &dev)?)
+            }
+            _ => None,
+        };
         Ok(Self {
             config,
             data,
@@ -362,7 +398,104 @@ impl Trainer {
             profile: StepProfile::default(),
             edges,
             triangles,
+            query_rest,
+            average: None,
+            warm_window: std::collections::VecDeque::new(),
+            warm_converged: false,
+            diagonal: f64::from((bounds.max - bounds.min).length()).max(1e-9),
         })
+    }
+
+    /// Where the warm start stands (averages over its last window of iterations).
+    #[must_use]
+    pub fn warm_status(&self) -> WarmStatus {
+        let n = self.warm_window.len().max(1) as f64;
+        WarmStatus {
+            iterations: self.warm_done,
+            converged: self.warm_converged,
+            kl: self.warm_window.iter().map(|w| w.0).sum::<f64>() / n,
+            position_relative: self.warm_window.iter().map(|w| w.1).sum::<f64>() / n,
+        }
+    }
+
+    /// Whether the warm start still has iterations to run.
+    fn warm_pending(&self) -> bool {
+        !self.is_static()
+            && !self.warm_converged
+            && self.warm_done < self.config.warm_start_iterations
+    }
+
+    /// Records one warm-start iteration in the convergence window and applies the test.
+    fn note_warm(&mut self, r: &WarmRecord) {
+        self.warm_window.push_back((r.kl, r.position_relative));
+        while self.warm_window.len() as u64 > self.config.warm_start_window {
+            self.warm_window.pop_front();
+        }
+        let s = self.warm_status();
+        self.warm_converged = self.warm_window.len() as u64 == self.config.warm_start_window
+            && s.kl <= self.config.warm_start_kl_tolerance
+            && s.position_relative <= self.config.warm_start_position_tolerance;
+    }
+
+    /// Adam's settings: the configured ones, with [`TrainConfig::static_lr`] for the static
+    /// baseline's logits.
+    fn adam_config(config: &TrainConfig, static_weights: bool) -> crate::optim::AdamConfig {
+        let mut adam = config.adam;
+        if static_weights {
+            adam.lr = config.static_lr;
+        }
+        adam
+    }
+
+    /// The learning rate of image iteration `done` (0-based). Stage 1: a linear ramp over
+    /// `lr_warmup` iterations, then a half cosine from the full rate down to `lr_final_fraction`
+    /// of it at its last iteration. Stage 4 (iterations past stage 1's) follows the same
+    /// cosine over its own iterations, without the ramp.
+    fn image_lr(&self, done: u64) -> f64 {
+        let base = Self::adam_config(&self.config, self.is_static()).lr;
+        let (ramp, start, len) = if done < self.config.iterations {
+            (self.config.lr_warmup, 0, self.config.iterations)
+        } else {
+            (
+                0,
+                self.config.iterations,
+                self.config.stages.refine_iterations,
+            )
+        };
+        let k = done - start;
+        let warm = if ramp == 0 {
+            1.0
+        } else {
+            ((k + 1) as f64 / ramp as f64).min(1.0)
+        };
+        let span = len.saturating_sub(ramp).max(1) as f64;
+        let t = (k.saturating_sub(ramp) as f64 / span).min(1.0);
+        let f = self.config.lr_final_fraction;
+        let cosine = f + (1.0 - f) * 0.5 * (1.0 + (core::f64::consts::PI * t).cos());
+        base * warm * cosine
+    }
+
+    fn is_static(&self) -> bool {
+        matches!(self.model, Model::Static { .. })
+    }
+
+    /// Replaces the parameters by their running average over the image iterations so far
+    /// ([`TrainConfig::ema_half_life`]) and drops the average: what is exported, and where the
+    /// later stages continue from (stage 4 starts an average of its own). A no-op without one.
+    pub fn adopt_average(&mut self) -> Result<(), TrainError> {
+        if let Some(mut a) = self.average.take() {
+            a.swap()?;
+        }
+        Ok(())
+    }
+
+    /// The homogeneous rest positions `[V, 4]` the batch is skinned from: the query rows' own
+    /// positions with [`TrainConfig::consistent_queries`], else the training vertices'.
+    fn rest_at(&self, query: Option<&Tensor>) -> Result<Tensor, TrainError> {
+        match (&self.query_rest, query) {
+            (Some(rest), Some(q)) => Ok(rest.index_select(q, 0)?),
+            _ => Ok(self.rest.clone()),
+        }
     }
 
     /// Where the iterations run so far spent their time ([`profile`]).
@@ -479,11 +612,12 @@ impl Trainer {
         &self,
         init: &Tensor,
         skinning: &Tensor,
+        rest: &Tensor,
         b: usize,
     ) -> Result<Tensor, TrainError> {
         let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
         let init = init.broadcast_as((b, v, j))?.contiguous()?;
-        Ok(lbs(&init, skinning, &self.rest)?)
+        Ok(lbs(&init, skinning, rest)?)
     }
 
     fn sample(&self, phase: u64, iteration: u64) -> Vec<usize> {
@@ -540,13 +674,16 @@ impl Trainer {
         };
         timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         let skinning = self.frame_skinning(&frames)?;
+        let rest = self.rest_at(query.as_ref())?;
         let offset =
-            (lbs(&w, &skinning, &self.rest)? - self.initial_posing(&init, &skinning, b)?)?;
+            (lbs(&w, &skinning, &rest)? - self.initial_posing(&init, &skinning, &rest, b)?)?;
         // m² → cm².
         let position = (offset.sqr()?.sum_all()? * (1e4 / (b * v) as f64))?;
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
         let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
         let position_cm2 = f64::from(position.to_vec0::<f32>()?);
+        // cm² back to m², then relative to the diagonal.
+        let position_relative = (position_cm2 * 1e-4).sqrt() / self.diagonal;
         timer.lap(&mut self.profile, KIND, Phase::Skinning);
         let grads = total.backward()?;
         timer.lap(&mut self.profile, KIND, Phase::Backward);
@@ -554,11 +691,14 @@ impl Trainer {
         timer.lap(&mut self.profile, KIND, Phase::Optimiser);
         self.profile.finish_iteration(KIND);
         self.warm_done += 1;
-        Ok(WarmRecord {
+        let record = WarmRecord {
             iteration: self.warm_done,
             kl,
             position_cm2,
-        })
+            position_relative,
+        };
+        self.note_warm(&record);
+        Ok(record)
     }
 
     /// One image-loss iteration on a seeded batch; returns its losses (before the step).
@@ -571,15 +711,18 @@ impl Trainer {
     /// parameter by lr at once.
     pub fn step(&mut self) -> Result<LossRecord, TrainError> {
         if self.done == 0 {
-            self.optimiser = Adam::from_varmap(&self.varmap, self.config.adam)?;
+            self.optimiser = Adam::from_varmap(
+                &self.varmap,
+                Self::adam_config(&self.config, self.is_static()),
+            )?;
         }
-        let ramp = self.config.lr_warmup;
-        let scale = if ramp == 0 {
-            1.0
-        } else {
-            ((self.done + 1) as f64 / ramp as f64).min(1.0)
-        };
-        self.optimiser.set_lr(self.config.adam.lr * scale);
+        if self.average.is_none() && self.config.ema_half_life > 0.0 {
+            self.average = Some(average::ParameterAverage::new(
+                &self.varmap,
+                self.config.ema_half_life,
+            )?);
+        }
+        self.optimiser.set_lr(self.image_lr(self.done));
         const KIND: IterationKind = IterationKind::Image;
         let mut timer = Timer::start();
         let frames = self.sample(PHASE_IMAGE, self.done);
@@ -588,7 +731,8 @@ impl Trainer {
         timer.lap(&mut self.profile, KIND, Phase::Forward);
         let b = frames.len();
         let skinning = self.frame_skinning(&frames)?;
-        let posed = lbs(&w, &skinning, &self.rest)?;
+        let rest = self.rest_at(query.as_ref())?;
+        let posed = lbs(&w, &skinning, &rest)?;
         timer.lap(&mut self.profile, KIND, Phase::Skinning);
         let views: Vec<BatchView> = frames
             .iter()
@@ -617,7 +761,8 @@ impl Trainer {
             LaplacianReference::Absolute => posed.clone(),
             // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
             LaplacianReference::InitialSkinning => {
-                (&posed - self.initial_posing(&self.init_at(query.as_ref())?, &skinning, b)?)?
+                let init = self.init_at(query.as_ref())?;
+                (&posed - self.initial_posing(&init, &skinning, &rest, b)?)?
             }
         };
         let lap = (self.laplacian.loss(&lap_input)? / (b as f64 * v))?;
@@ -650,6 +795,9 @@ impl Trainer {
         let grads = total.backward()?;
         timer.lap(&mut self.profile, KIND, Phase::Backward);
         self.optimiser.step(&grads)?;
+        if let Some(a) = &mut self.average {
+            a.update()?;
+        }
         timer.lap(&mut self.profile, KIND, Phase::Optimiser);
         self.profile.finish_iteration(KIND);
         Ok(record)
@@ -672,6 +820,21 @@ impl Trainer {
             .map(|(k, v)| (format!("{prefix}{k}"), v))
             .collect();
         insert_varmap(&mut tensors, &format!("{prefix}param."), &self.varmap)?;
+        if let Some(a) = &self.average {
+            for (k, v) in a.state_tensors()? {
+                tensors.insert(format!("{prefix}{k}"), v);
+            }
+        }
+        let window: Vec<f64> = self.warm_window.iter().flat_map(|w| [w.0, w.1]).collect();
+        let n = self.warm_window.len();
+        tensors.insert(
+            format!("{prefix}warm.window"),
+            Tensor::from_vec(window, (n, 2), &Device::Cpu)?,
+        );
+        tensors.insert(
+            format!("{prefix}warm.converged"),
+            Tensor::new(&[u32::from(self.warm_converged)], &Device::Cpu)?,
+        );
         let p = [self.warm_done, self.done].map(split_u64).concat();
         tensors.insert(
             format!("{prefix}progress"),
@@ -706,9 +869,30 @@ impl Trainer {
         self.optimiser
             .load_state_tensors(&state)
             .map_err(|e| bad(e.to_string()))?;
+        self.average = if state.contains_key("avg.weight") {
+            let mut a = average::ParameterAverage::new(&self.varmap, self.config.ema_half_life)?;
+            a.load_state_tensors(&state)
+                .map_err(|e| bad(e.to_string()))?;
+            Some(a)
+        } else {
+            None
+        };
         let p = read_u64s(tensors, &format!("{prefix}progress"), 2).map_err(bad)?;
         self.warm_done = p[0];
         self.done = p[1];
+        let window = tensors
+            .get(&format!("{prefix}warm.window"))
+            .ok_or_else(|| bad(format!("`{prefix}warm.window` is missing")))?
+            .to_vec2::<f64>()
+            .map_err(|e| bad(format!("`{prefix}warm.window`: {e}")))?;
+        self.warm_window = window.iter().map(|r| (r[0], r[1])).collect();
+        self.warm_converged = tensors
+            .get(&format!("{prefix}warm.converged"))
+            .ok_or_else(|| bad(format!("`{prefix}warm.converged` is missing")))?
+            .to_vec1::<u32>()
+            .map_err(|e| bad(format!("`{prefix}warm.converged`: {e}")))?
+            .first()
+            .is_some_and(|&c| c != 0);
         Ok(())
     }
 
@@ -727,7 +911,11 @@ impl Trainer {
         let csv_path = dir.join("losses.csv");
         let mut csv = reopen_log(&csv_path, LossRecord::CSV_HEADER, self.done)?;
         let warm_path = dir.join("warm_start.csv");
-        let mut warm_csv = reopen_log(&warm_path, "iteration,kl,position_cm2", self.warm_done)?;
+        let mut warm_csv = reopen_log(
+            &warm_path,
+            "iteration,kl,position_cm2,position_relative",
+            self.warm_done,
+        )?;
         let total = self.config.warm_start_iterations + self.config.iterations;
         let bar = if progress {
             indicatif::ProgressBar::new(total)
@@ -742,12 +930,12 @@ impl Trainer {
         );
         bar.set_position(self.warm_done + self.done);
         let ckpt = dir.join("checkpoint.safetensors");
-        while self.warm_done < self.config.warm_start_iterations {
+        while self.warm_pending() {
             let r = self.warm_step()?;
             writeln!(
                 warm_csv,
-                "{},{:.6e},{:.6e}",
-                r.iteration, r.kl, r.position_cm2
+                "{},{:.6e},{:.6e},{:.6e}",
+                r.iteration, r.kl, r.position_cm2, r.position_relative
             )
             .map_err(io(&warm_path))?;
             bar.set_message(format!(
@@ -763,6 +951,10 @@ impl Trainer {
             }
         }
         warm_csv.flush().map_err(io(&warm_path))?;
+        if self.warm_converged && self.warm_done < self.config.warm_start_iterations {
+            // The skipped warm-start iterations leave the progress bar.
+            bar.set_length(self.warm_done + self.config.iterations);
+        }
         while self.done < self.config.iterations {
             let r = self.step()?;
             writeln!(csv, "{}", r.csv_row()).map_err(io(&csv_path))?;

@@ -197,6 +197,7 @@ fn static_baseline_moves_towards_the_silhouettes() {
         batch: 4,
         // Within reach of 40 steps at lr 5e-2: the hard initial step must turn into a blend.
         static_epsilon: 1e-2,
+        static_lr: 5e-2,
         lr_warmup: 0,
         adam: crate::optim::AdamConfig {
             lr: 5e-2,
@@ -466,4 +467,74 @@ fn query_draws_are_seeded_per_iteration_and_resume_exactly() {
     d.resume(&c_dir.join("checkpoint.safetensors")).unwrap();
     d.run(&c_dir, false).unwrap();
     assert_eq!(outputs(&a), outputs(&d));
+}
+
+#[test]
+fn the_warm_start_stops_once_converged_and_reports_hitting_its_cap() {
+    let (data, _) = scene(3);
+    let run = |kl: f64, cap: u64| {
+        let cfg = TrainConfig {
+            warm_start_iterations: cap,
+            warm_start_kl_tolerance: kl,
+            warm_start_position_tolerance: 1.0,
+            warm_start_window: 3,
+            iterations: 0,
+            ..config()
+        };
+        let mut t = Trainer::new(data.clone(), cfg, false).unwrap();
+        t.run(&tempfile::tempdir().unwrap().path().join("w"), false)
+            .unwrap();
+        t.warm_status()
+    };
+    // Any KL passes: converged as soon as the window is full.
+    let easy = run(1e9, 40);
+    assert!(easy.converged && easy.iterations == 3, "{easy:?}");
+    // No KL passes: it runs to the cap and says so.
+    let hard = run(0.0, 7);
+    assert!(!hard.converged && hard.iterations == 7, "{hard:?}");
+    assert!(hard.kl > 0.0 && hard.position_relative > 0.0);
+}
+
+#[test]
+fn the_image_learning_rate_ramps_then_falls_along_a_cosine() {
+    let (data, _) = scene(1);
+    let cfg = TrainConfig {
+        iterations: 110,
+        lr_warmup: 10,
+        lr_final_fraction: 0.1,
+        ..config()
+    };
+    let lr = cfg.adam.lr;
+    let t = Trainer::new(data, cfg, false).unwrap();
+    assert!((t.image_lr(0) - 0.1 * lr).abs() < 1e-15);
+    assert!((t.image_lr(9) - lr).abs() < 1e-15);
+    // Half-way through the cosine (iteration 10 + 50): the mean of the two ends.
+    assert!((t.image_lr(60) - 0.55 * lr).abs() < 1e-12);
+    assert!((t.image_lr(109) - 0.1 * lr).abs() < 0.01 * lr);
+    assert!((t.image_lr(500) - 0.1 * lr).abs() < 1e-15);
+}
+
+#[test]
+fn queries_pose_their_own_rest_positions_and_the_box_is_a_cube() {
+    let (data, _) = scene_with_queries(2);
+    let q = data.queries.clone().unwrap();
+    let rows = Tensor::from_vec(vec![1u32, 0, 2], 3, &Device::Cpu).unwrap();
+    for consistent in [true, false] {
+        let cfg = TrainConfig {
+            consistent_queries: consistent,
+            ..config()
+        };
+        let t = Trainer::new(data.clone(), cfg, false).unwrap();
+        let rest = t.rest_at(Some(&rows)).unwrap().to_vec2::<f32>().unwrap();
+        if consistent {
+            for (r, &i) in rest.iter().zip(&[1usize, 0, 2]) {
+                assert_eq!(&r[..3], &q.positions[i].to_array());
+            }
+        } else {
+            assert_eq!(rest.len(), data.template.vertex_count());
+        }
+        let c = t.net().unwrap().config();
+        let side: Vec<f32> = (0..3).map(|k| c.bbox_max[k] - c.bbox_min[k]).collect();
+        assert!((side[0] - side[1]).abs() < 1e-6 && (side[1] - side[2]).abs() < 1e-6);
+    }
 }

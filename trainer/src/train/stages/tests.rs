@@ -49,6 +49,9 @@ fn images(data: &TrainData, truth: &[f32], texture: impl Fn(Vec3) -> Vec3) -> Ve
 
 fn stage_config(albedo: u64, shadow: u64, refine: u64) -> TrainConfig {
     TrainConfig {
+        // A constant rate: the resume tests stop runs by giving them fewer iterations, which
+        // would otherwise change the cosine schedule of the iterations that remain.
+        lr_final_fraction: 1.0,
         stages: StageConfig {
             albedo_iterations: albedo,
             shadow_iterations: shadow,
