@@ -115,27 +115,27 @@ pub fn nearest_anchors(anchors: &[Vec3], points: &[Vec3]) -> Vec<u32> {
     points
         .iter()
         .map(|&p| {
-            let c = cell_of(p);
-            // Chebyshev distance (in cells) from p's cell to the far side of the grid.
+            // Rings are counted from the grid cell nearest to p (p itself may lie outside the
+            // grid, arbitrarily far): a cell in ring r + 1 is then at least r cells from p on
+            // some axis, inside the grid or not.
+            let c: [i64; 3] = {
+                let raw = cell_of(p);
+                core::array::from_fn(|k| raw[k].clamp(0, dims[k] - 1))
+            };
             let reach = (0..3)
-                .map(|k| c[k].abs().max((dims[k] - 1 - c[k]).abs()))
+                .map(|k| c[k].max(dims[k] - 1 - c[k]))
                 .max()
                 .unwrap_or(0);
+            let span = |k: usize, r: i64| (c[k] - r).max(0)..=(c[k] + r).min(dims[k] - 1);
             let mut best = (f32::INFINITY, 0u32);
             for r in 0..=reach {
-                for z in c[2] - r..=c[2] + r {
-                    for y in c[1] - r..=c[1] + r {
-                        for x in c[0] - r..=c[0] + r {
+                for z in span(2, r) {
+                    for y in span(1, r) {
+                        for x in span(0, r) {
                             let ring = (x - c[0]).abs() == r
                                 || (y - c[1]).abs() == r
                                 || (z - c[2]).abs() == r;
-                            let inside = x >= 0
-                                && y >= 0
-                                && z >= 0
-                                && x < dims[0]
-                                && y < dims[1]
-                                && z < dims[2];
-                            if !ring || !inside {
+                            if !ring {
                                 continue;
                             }
                             let cell = index([x, y, z]);
@@ -148,8 +148,6 @@ pub fn nearest_anchors(anchors: &[Vec3], points: &[Vec3]) -> Vec<u32> {
                         }
                     }
                 }
-                // Every anchor within r cells of p has been seen (p lies inside its cell, so
-                // anything in ring r + 1 is at least r cells away).
                 if libm::sqrtf(best.0) <= r as f32 * cell {
                     break;
                 }
@@ -225,6 +223,11 @@ mod tests {
         assert!(nearest_anchors(&[], &points).is_empty());
         assert_eq!(
             nearest_anchors(&[Vec3::ONE], &[Vec3::ZERO, Vec3::X]),
+            vec![0, 0]
+        );
+        // Points far outside a degenerate (one-cell) grid end after a single ring.
+        assert_eq!(
+            nearest_anchors(&[Vec3::ONE, Vec3::ONE], &[Vec3::splat(-1e6), Vec3::splat(1e6)]),
             vec![0, 0]
         );
     }
