@@ -227,7 +227,10 @@ mod tests {
         );
         // Points far outside a degenerate (one-cell) grid end after a single ring.
         assert_eq!(
-            nearest_anchors(&[Vec3::ONE, Vec3::ONE], &[Vec3::splat(-1e6), Vec3::splat(1e6)]),
+            nearest_anchors(
+                &[Vec3::ONE, Vec3::ONE],
+                &[Vec3::splat(-1e6), Vec3::splat(1e6)]
+            ),
             vec![0, 0]
         );
     }

@@ -82,6 +82,11 @@ pub fn run(
         row.method = name.to_string();
         Ok(row)
     };
+    // An ablation reports every variant, a worse one too: no refusal.
+    let base = TrainConfig {
+        refuse_worse_than_initial: false,
+        ..base
+    };
     let mut rows = vec![(eval(&Skinning::Initial, "initial weights")?, 0.0)];
 
     let t = Instant::now();

@@ -28,14 +28,15 @@ pub struct Args {
     /// Seed of the capture and of training.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// SkinNet warm-start iterations (regressing the initial weights).
-    #[arg(long, default_value_t = 300)]
+    /// Cap of SkinNet's warm start (regressing the initial weights; it stops earlier once
+    /// converged).
+    #[arg(long, default_value_t = TrainConfig::default().warm_start_iterations)]
     pub warm_start: u64,
     /// SkinNet image-loss iterations.
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = 1000)]
     pub iterations: u64,
     /// Static-baseline iterations.
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = 1000)]
     pub static_iterations: u64,
     /// Training-template vertex count for SkinNet.
     #[arg(long, default_value_t = DataOptions::default().train_vertices)]
@@ -120,7 +121,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "train SkinNet (data + loop + export)",
         t.elapsed().as_secs_f64(),
     ));
-    let per_iteration = loop_s / (args.iterations + args.warm_start).max(1) as f64;
+    // The warm start stops once converged: its log has one row per iteration run.
+    let warm_ran = std::fs::read_to_string(skin_work.join("warm_start.csv"))
+        .map(|t| t.lines().skip(1).filter(|l| !l.is_empty()).count() as u64)
+        .unwrap_or(args.warm_start);
+    let per_iteration = loop_s / (args.iterations + warm_ran).max(1) as f64;
 
     let static_file = out.join("static_weights.json");
     let static_work = out.join("train-static");
@@ -235,7 +240,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let _ = writeln!(
         md,
         "\nSkinNet: {} warm-start + {} image iterations at {} training vertices, {:.3} s per iteration on average.",
-        args.warm_start, args.iterations, args.train_vertices, per_iteration
+        warm_ran, args.iterations, args.train_vertices, per_iteration
     );
     let _ = writeln!(md, "Total: {:.1} s.", total.elapsed().as_secs_f64());
     let md_path = out.join("results.md");

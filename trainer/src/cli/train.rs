@@ -41,16 +41,23 @@ pub struct Args {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Write the model even when it explains the held-out silhouettes worse than the initial
+    /// weights (by default that is an error and nothing is written).
+    #[arg(long)]
+    pub allow_worse: bool,
 }
 
 /// Runs `trainer train`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let capture = load_capture(&args.capture)
         .with_context(|| format!("loading the capture {}", args.capture.display()))?;
-    let config = match &args.config {
+    let mut config = match &args.config {
         Some(path) => TrainConfig::load(path)?,
         None => TrainConfig::default(),
     };
+    if args.allow_worse {
+        config.refuse_worse_than_initial = false;
+    }
     let work = args
         .work
         .clone()
@@ -140,6 +147,7 @@ pub fn train_skinnet(
     // Stage 4's average, when it ran.
     trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
+    check_validation(&trainer)?;
     let net = trainer.net().context("the trainer holds no network")?;
     let mut model = to_skf_model(net, &skeleton)?;
     model.candidates = trainer.export_candidates();
@@ -149,6 +157,35 @@ pub fn train_skinnet(
     }
     model.write(out)?;
     Ok(seconds)
+}
+
+/// Prints the validation scores of the initial weights and of the model about to be written
+/// (and which averaged iterate was kept), and refuses a model that explains the validation
+/// silhouettes worse than the initial weights unless the configuration allows it.
+pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
+    let report = trainer.validation_report()?;
+    let frames = match report.held_out_frames {
+        0 => "the training frames (too few to hold any out)".to_string(),
+        n => format!("{n} held-out frames"),
+    };
+    println!("validation on {frames}, {} views:", report.model.views);
+    println!("  initial weights: {}", report.initial);
+    println!("  trained model:   {}", report.model);
+    if let Some((iteration, _)) = trainer.best_validation() {
+        println!("  (the parameter average at image iteration {iteration} scored best)");
+    }
+    if let Some(worse) = report
+        .guard(trainer.config().refuse_worse_than_initial)
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "{e}; nothing was written. Check the capture (masks, cameras, motion) and the \
+                 training configuration, or pass --allow-worse to write the model anyway."
+            )
+        })?
+    {
+        eprintln!("warning: {worse}; written anyway (--allow-worse).");
+    }
+    Ok(())
 }
 
 /// Says how the warm start ended: converged, or stopped at its cap (a warning on stderr: the
@@ -208,6 +245,7 @@ pub fn train_static(
     trainer.run(work, progress)?;
     trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
+    check_validation(&trainer)?;
     let dense = trainer
         .static_weights()?
         .context("the trainer holds no static weights")?;

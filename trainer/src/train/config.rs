@@ -16,9 +16,13 @@ pub struct LossWeights {
     pub silhouette_contour: f64,
     /// Laplacian (mean squared norm per vertex, metres²).
     pub laplacian: f64,
-    /// Geodesic skinning regulariser (mean per vertex).
+    /// Geodesic skinning regulariser (mean per vertex; Eqs. 7–8). Off by default: the
+    /// candidate joints ([`TrainConfig::candidate_joints`]) make its purpose, locality, a hard
+    /// constraint, and as a soft term it holds the weights near the initial ones. On the
+    /// built-in capture (1,000 image iterations, 8 candidates) switching both regularisers off
+    /// took SkinNet from 0.896 to 0.696 cm Chamfer (bone heat 1.003); see docs/fidelity.md.
     pub skinning: f64,
-    /// Part-wise regulariser (mean per rigid skin vertex).
+    /// Part-wise regulariser (mean per rigid skin vertex; off by default, see `skinning`).
     pub partwise: f64,
 }
 
@@ -28,8 +32,8 @@ impl Default for LossWeights {
             silhouette_boundary: 1.0,
             silhouette_contour: 1.0,
             laplacian: 1e3,
-            skinning: 10.0,
-            partwise: 10.0,
+            skinning: 0.0,
+            partwise: 0.0,
         }
     }
 }
@@ -113,6 +117,16 @@ pub struct TrainConfig {
     /// baseline's) softmax ranges over at most this many joints near each point, the rest
     /// weigh exactly zero; 0 turns the restriction off.
     pub candidate_joints: usize,
+    /// Training frames held out for validation from images ([`super::validation`]), spread
+    /// evenly; at most a quarter of the frames, none (validate on the training frames) with
+    /// fewer than four. 0 turns validation and best-average selection off.
+    pub validation_frames: usize,
+    /// Validate the parameter average every this many image iterations (and after the last);
+    /// the best average is the one exported.
+    pub validation_every: u64,
+    /// Refuse to export a model that explains the validation silhouettes worse than the
+    /// initial weights (`trainer train --allow-worse` turns this off).
+    pub refuse_worse_than_initial: bool,
     /// Loss weights.
     pub weights: LossWeights,
     /// The Laplacian loss's reference shape.
@@ -171,6 +185,9 @@ impl Default for TrainConfig {
             consistent_queries: true,
             cubic_normalisation: true,
             candidate_joints: crate::candidates::DEFAULT_CANDIDATES,
+            validation_frames: 4,
+            validation_every: 100,
+            refuse_worse_than_initial: true,
             weights: LossWeights::default(),
             laplacian_reference: LaplacianReference::default(),
             skinning_r: crate::losses::skinning_reg::PAPER_R,
@@ -274,6 +291,9 @@ impl TrainConfig {
         }
         if self.candidate_joints > skinfield_formats::skf::candidates::MAX_CANDIDATES {
             return Err("candidate_joints");
+        }
+        if self.validation_frames > 0 && self.validation_every == 0 {
+            return Err("validation_every");
         }
         if self.adam.clip.is_some_and(|c| !(c.is_finite() && c > 0.0)) {
             return Err("adam.clip");

@@ -149,6 +149,7 @@ pub fn train_data(
                 Ok(View {
                     camera: camera.clone(),
                     target,
+                    coverage: mask.coverage.into(),
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;

@@ -24,6 +24,7 @@ pub mod plot;
 pub mod profile;
 pub mod queries;
 pub mod stages;
+pub mod validation;
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -54,8 +55,10 @@ use profile::{IterationKind, Phase, StepProfile, Timer};
 pub struct View {
     /// The calibrated camera.
     pub camera: Camera,
-    /// Distance transform and contour of the foreground mask.
+    /// The outline of the foreground mask and points along it.
     pub target: SilhouetteTarget,
+    /// The mask's coverage (row-major, `[0, 1]`; validation's IoU).
+    pub coverage: Arc<[f32]>,
 }
 
 /// One training frame.
@@ -232,7 +235,19 @@ pub struct Trainer {
     warm_converged: bool,
     /// The template's bounding-box diagonal (the warm start's position scale).
     diagonal: f64,
+    /// The held-out frames ([`validation`]); empty when too few frames were given (the
+    /// training frames are scored instead).
+    validation: Vec<Frame>,
+    /// The initial weights' validation score (before any candidate restriction).
+    initial_score: validation::ValidationScore,
+    /// The best-scoring parameter average so far: `(score, image iteration, parameters)`.
+    best: Option<(validation::ValidationScore, u64, NamedTensors)>,
+    /// `(image iteration, score)` of every validation so far.
+    validation_log: Vec<(u64, validation::ValidationScore)>,
 }
+
+/// Copies of parameters by name.
+type NamedTensors = Vec<(String, Tensor)>;
 
 /// The candidate joints of a run and the masks they make.
 struct Candidates {
@@ -379,6 +394,19 @@ impl Trainer {
                 q.positions.len()
             )));
         }
+        let validation = validation::hold_out(&mut data, config.validation_frames);
+        let edges = Arc::new(EdgeTable::new(v, &data.template.triangles));
+        let initial_score = {
+            let frames = if validation.is_empty() {
+                &data.frames
+            } else {
+                &validation
+            };
+            let dense: Vec<f32> = (0..frames.len())
+                .flat_map(|_| data.init_weights.iter().copied())
+                .collect();
+            validation::score(&data, frames, &dense, &edges)
+        };
         let candidates = Candidates::new(&mut data, config.candidate_joints);
         let t = &data.template;
         let dev = Device::Cpu;
@@ -444,7 +472,6 @@ impl Trainer {
             &dev,
         )?;
         let laplacian = UniformLaplacian::new(&t.positions, &t.triangles, &dev)?;
-        let edges = Arc::new(EdgeTable::new(v, &t.triangles));
         let triangles: Arc<[[u32; 3]]> = t.triangles.clone().into();
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
@@ -488,6 +515,10 @@ impl Trainer {
             warm_window: std::collections::VecDeque::new(),
             warm_converged: false,
             diagonal: f64::from((bounds.max - bounds.min).length()).max(1e-9),
+            validation,
+            initial_score,
+            best: None,
+            validation_log: Vec::new(),
         })
     }
 
@@ -567,11 +598,114 @@ impl Trainer {
     /// Replaces the parameters by their running average over the image iterations so far
     /// ([`TrainConfig::ema_half_life`]) and drops the average: what is exported, and where the
     /// later stages continue from (stage 4 starts an average of its own). A no-op without one.
+    ///
+    /// With validation snapshots ([`Trainer::validate_average`]), the best-scoring one is
+    /// adopted instead; it is one of the averages, so the rule is "the best average seen".
     pub fn adopt_average(&mut self) -> Result<(), TrainError> {
         if let Some(mut a) = self.average.take() {
             a.swap()?;
         }
+        if let Some((_, _, params)) = self.best.take() {
+            let vars = self
+                .varmap
+                .data()
+                .lock()
+                .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
+            for (name, value) in &params {
+                if let Some(var) = vars.get(name) {
+                    var.set(value)?;
+                }
+            }
+        }
         Ok(())
+    }
+
+    /// Scores the current parameters on the validation frames (the training frames when none
+    /// are held out).
+    pub fn validate(&self) -> Result<validation::ValidationScore, TrainError> {
+        let frames = if self.validation.is_empty() {
+            &self.data.frames
+        } else {
+            &self.validation
+        };
+        let poses: Vec<f32> = frames
+            .iter()
+            .flat_map(|f| f.pose_features.iter().copied())
+            .collect();
+        let w = self.weights_for_poses(poses, frames.len(), None)?;
+        let dense: Vec<f32> = w.flatten_all()?.to_vec1()?;
+        Ok(validation::score(&self.data, frames, &dense, &self.edges))
+    }
+
+    /// Scores the running parameter average (the current parameters without one), logs the
+    /// score and keeps a copy of the parameters when they are the best so far; returns the
+    /// score.
+    pub fn validate_average(&mut self) -> Result<validation::ValidationScore, TrainError> {
+        if let Some(a) = &mut self.average {
+            a.swap()?;
+        }
+        // Scored and copied while the average is in place; swapped back whatever happened.
+        let scored = self.validate().and_then(|score| {
+            let better = self
+                .best
+                .as_ref()
+                .is_none_or(|(best, _, _)| !score.is_worse_than(best));
+            let params = if better {
+                Some(self.parameter_copies()?)
+            } else {
+                None
+            };
+            Ok((score, params))
+        });
+        if let Some(a) = &mut self.average {
+            a.swap()?;
+        }
+        let (score, params) = scored?;
+        self.validation_log.push((self.done, score));
+        if let Some(params) = params {
+            self.best = Some((score, self.done, params));
+        }
+        Ok(score)
+    }
+
+    /// Copies of every parameter, by name.
+    fn parameter_copies(&self) -> Result<NamedTensors, TrainError> {
+        let vars = self
+            .varmap
+            .data()
+            .lock()
+            .map_err(|_| TrainError::Data("VarMap lock poisoned".into()))?;
+        vars.iter()
+            .map(|(name, var)| Ok((name.clone(), var.as_tensor().copy()?)))
+            .collect()
+    }
+
+    /// The initial weights' validation score and the number of held-out frames.
+    #[must_use]
+    pub fn initial_validation(&self) -> (validation::ValidationScore, usize) {
+        (self.initial_score, self.validation.len())
+    }
+
+    /// Every validation so far: `(image iteration, score)`.
+    #[must_use]
+    pub fn validation_log(&self) -> &[(u64, validation::ValidationScore)] {
+        &self.validation_log
+    }
+
+    /// The iteration and score of the best average so far (what [`Trainer::adopt_average`]
+    /// exports).
+    #[must_use]
+    pub fn best_validation(&self) -> Option<(u64, validation::ValidationScore)> {
+        self.best.as_ref().map(|(s, i, _)| (*i, *s))
+    }
+
+    /// The validation report of the current parameters against the initial weights.
+    pub fn validation_report(&self) -> Result<validation::ValidationReport, TrainError> {
+        Ok(validation::ValidationReport {
+            initial: self.initial_score,
+            model: self.validate()?,
+            held_out_frames: self.validation.len(),
+        })
     }
 
     /// The homogeneous rest positions `[V, 4]` the batch is skinned from: the query rows' own
@@ -645,6 +779,20 @@ impl Trainer {
     /// Weights `[B, V, J]` for the given frames, SkinNet queried at rows `query` (`[V]`) of the
     /// full-resolution query points, or at the training vertices themselves (`None`).
     fn weights_at(&self, frames: &[usize], query: Option<&Tensor>) -> Result<Tensor, TrainError> {
+        let poses: Vec<f32> = frames
+            .iter()
+            .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
+            .collect();
+        self.weights_for_poses(poses, frames.len(), query)
+    }
+
+    /// Weights `[B, V, J]` for `b` poses given by their concatenated pose features.
+    fn weights_for_poses(
+        &self,
+        poses: Vec<f32>,
+        b: usize,
+        query: Option<&Tensor>,
+    ) -> Result<Tensor, TrainError> {
         let j = self.data.skeleton.len();
         Ok(match &self.model {
             Model::Net {
@@ -652,10 +800,6 @@ impl Trainer {
                 encoded,
                 query_encoded,
             } => {
-                let poses: Vec<f32> = frames
-                    .iter()
-                    .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
-                    .collect();
                 let (rows, mask) = match (query, query_encoded) {
                     (Some(q), Some(points)) => (
                         points.index_select(q, 0)?,
@@ -671,7 +815,7 @@ impl Trainer {
                 };
                 net.forward_masked(
                     &rows,
-                    &Tensor::from_vec(poses, (frames.len(), 3 * j), &Device::Cpu)?,
+                    &Tensor::from_vec(poses, (b, 3 * j), &Device::Cpu)?,
                     mask.as_ref(),
                 )?
             }
@@ -682,9 +826,7 @@ impl Trainer {
                 };
                 let w = softmax_last(&logits)?;
                 let (v, _) = w.dims2()?;
-                w.unsqueeze(0)?
-                    .broadcast_as((frames.len(), v, j))?
-                    .contiguous()?
+                w.unsqueeze(0)?.broadcast_as((b, v, j))?.contiguous()?
             }
         })
     }
@@ -1071,9 +1213,47 @@ impl Trainer {
             // The skipped warm-start iterations leave the progress bar.
             bar.set_length(self.warm_done + self.config.iterations);
         }
+        let validation_path = dir.join("validation.csv");
+        let done = self.done;
+        // Row 0 is the initial weights' score, rewritten by a run from the start.
+        let mut validation_csv = reopen_log_keeping(
+            &validation_path,
+            "iteration,silhouette_px,boundary_px,contour_px,iou",
+            |row| {
+                done > 0
+                    && row
+                        .split(',')
+                        .next()
+                        .and_then(|i| i.parse::<u64>().ok())
+                        .is_some_and(|i| i <= done)
+            },
+        )?;
+        if self.done == 0 && self.config.iterations > 0 {
+            let s = self.initial_score;
+            writeln!(
+                validation_csv,
+                "0,{:.6},{:.6},{:.6},{:.6}",
+                s.silhouette_px, s.boundary_px, s.contour_px, s.iou
+            )
+            .map_err(io(&validation_path))?;
+        }
         while self.done < self.config.iterations {
             let r = self.step()?;
             writeln!(csv, "{}", r.csv_row()).map_err(io(&csv_path))?;
+            let every = self.config.validation_every;
+            if self.config.validation_frames > 0
+                && (self.done == self.config.iterations
+                    || (every > 0 && self.done.is_multiple_of(every)))
+            {
+                let s = self.validate_average()?;
+                writeln!(
+                    validation_csv,
+                    "{},{:.6},{:.6},{:.6},{:.6}",
+                    self.done, s.silhouette_px, s.boundary_px, s.contour_px, s.iou
+                )
+                .map_err(io(&validation_path))?;
+                validation_csv.flush().map_err(io(&validation_path))?;
+            }
             bar.set_message(format!(
                 "total {:.3} sil {:.2}/{:.2}px lap {:.2e} skin {:.2e} part {:.2e}",
                 r.total,

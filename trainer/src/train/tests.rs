@@ -106,6 +106,7 @@ pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
                 views: vec![View {
                     camera: camera.clone(),
                     target,
+                    coverage: cover.into(),
                 }],
             }
         })
@@ -129,6 +130,8 @@ pub(super) fn config() -> TrainConfig {
         batch: 2,
         checkpoint_every: 2,
         seed: 3,
+        // The tests below that validate turn it on; the others train on every frame.
+        validation_frames: 0,
         ..TrainConfig::default()
     }
 }
@@ -639,6 +642,7 @@ fn finger_scene(joints: usize, frames: usize) -> TrainData {
                 views: vec![View {
                     camera: camera.clone(),
                     target: SilhouetteTarget::from_coverage(96, 96, &cover).unwrap(),
+                    coverage: cover.into(),
                 }],
             }
         })
@@ -715,5 +719,135 @@ fn candidate_joints_make_far_joint_spikes_impossible() {
     assert!(
         free > 3.0 * local,
         "spike {free} m unconstrained vs {local} m with candidates"
+    );
+}
+
+/// The tube scene with `frames` frames whose training views (not the held-out ones) show the
+/// tube bent by `train_truth` weights instead of the truth: "trained with wrong silhouettes".
+fn scene_with_training_silhouettes_of(frames: usize, train_truth: &[f32]) -> TrainData {
+    let (mut data, _) = scene(frames);
+    let held = super::validation::held_out_indices(frames, 4);
+    let template = data.template.clone();
+    for (f, frame) in data.frames.iter_mut().enumerate() {
+        if held.contains(&f) {
+            continue;
+        }
+        for view in &mut frame.views {
+            let posed: Vec<Vec3> = template
+                .positions
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    (frame.skinning[0] * p.extend(1.0) * train_truth[2 * i]
+                        + frame.skinning[1] * p.extend(1.0) * train_truth[2 * i + 1])
+                        .truncate()
+                })
+                .collect();
+            let cover = crate::raster::coverage(&view.camera, &posed, &template.triangles, 4);
+            view.target = SilhouetteTarget::from_coverage(64, 64, &cover).unwrap();
+            view.coverage = cover.into();
+        }
+    }
+    data
+}
+
+/// The static baseline of `static_baseline_moves_towards_the_silhouettes`, validated.
+fn validated_static_run(data: TrainData) -> Trainer {
+    let cfg = TrainConfig {
+        iterations: 40,
+        batch: 4,
+        static_epsilon: 1e-2,
+        static_lr: 3e-1,
+        lr_warmup: 0,
+        validation_frames: 4,
+        validation_every: 10,
+        weights: LossWeights {
+            laplacian: 0.0,
+            ..Default::default()
+        },
+        ..config()
+    };
+    let mut t = Trainer::new(data, cfg, true).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    t.run(dir.path(), false).unwrap();
+    // Four validations (iterations 10, 20, 30, 40) after the initial row.
+    let csv = std::fs::read_to_string(dir.path().join("validation.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 1 + 4, "{csv}");
+    assert_eq!(t.validation_log().len(), 4);
+    t.adopt_average().unwrap();
+    t
+}
+
+#[test]
+fn validation_holds_frames_out_and_spreads_them() {
+    use super::validation::held_out_indices;
+    assert_eq!(held_out_indices(40, 4), vec![5, 15, 25, 35]);
+    assert_eq!(held_out_indices(8, 4), vec![2, 6], "at most a quarter");
+    assert!(held_out_indices(3, 4).is_empty());
+    let (data, _) = scene(8);
+    let cfg = TrainConfig {
+        validation_frames: 4,
+        ..config()
+    };
+    let t = Trainer::new(data, cfg, true).unwrap();
+    let (initial, held) = t.initial_validation();
+    assert_eq!(held, 2);
+    assert_eq!(t.data.frames.len(), 6);
+    assert_eq!(initial.views, 2);
+    // The static baseline starts at (nearly) the initial weights: the same score.
+    let now = t.validate().unwrap();
+    assert!(
+        (now.silhouette_px - initial.silhouette_px).abs() < 0.05 * initial.silhouette_px,
+        "{now} vs {initial}"
+    );
+    assert!(initial.iou > 0.5 && initial.iou < 1.0, "{initial}");
+}
+
+#[test]
+fn the_guard_passes_a_model_that_learned_and_refuses_one_trained_on_wrong_silhouettes() {
+    let (_, truth) = scene(1);
+    // Good: the true silhouettes everywhere.
+    let good = validated_static_run(scene_with_training_silhouettes_of(8, &truth));
+    let report = good.validation_report().unwrap();
+    assert_eq!(report.held_out_frames, 2);
+    assert!(
+        report.model.silhouette_px < report.initial.silhouette_px,
+        "{report:?}"
+    );
+    assert_eq!(report.guard(true), Ok(None));
+    // The exported parameters are the best-scoring average.
+    let (_, best) = good.best_validation().unwrap_or_default();
+    assert!(
+        good.validation_log()
+            .iter()
+            .all(|(_, s)| s.silhouette_px >= best.silhouette_px)
+    );
+
+    // Broken: the training images show the tube bending near its tip (weights blended over
+    // y ∈ [0.8, 1] instead of [0.35, 0.65]); the held-out frames show the truth.
+    let (data, _) = scene(1);
+    let wrong: Vec<f32> = data
+        .template
+        .positions
+        .iter()
+        .flat_map(|p| {
+            let b = ((p.y - 0.8) / 0.2).clamp(0.0, 1.0);
+            [1.0 - b, b]
+        })
+        .collect();
+    let broken = validated_static_run(scene_with_training_silhouettes_of(8, &wrong));
+    let report = broken.validation_report().unwrap();
+    assert!(report.model_is_worse(), "{report:?}");
+    let refusal = report.guard(true).unwrap_err();
+    assert!(
+        refusal
+            .to_string()
+            .contains("worse than its initial weights"),
+        "{refusal}"
+    );
+    assert_eq!(
+        report.guard(false),
+        Ok(Some(refusal)),
+        "--allow-worse warns"
     );
 }

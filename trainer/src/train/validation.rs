@@ -1,0 +1,251 @@
+//! Validation from images: how well a weight set explains silhouettes it was not trained on,
+//! with no ground-truth geometry.
+//!
+//! A user cannot tell a broken model from a good one without ground truth, so the trainer holds
+//! out a few training frames ([`TrainConfig::validation_frames`], spread evenly over the
+//! capture's training frames), scores the posed training template against their masks every
+//! [`TrainConfig::validation_every`] image iterations, keeps the best-scoring parameter average
+//! for export, and `trainer train` refuses to write a model that explains the held-out images
+//! worse than the initial weights do ([`TrainConfig::refuse_worse_than_initial`]).
+//!
+//! Two figures per score, both from the same views:
+//!
+//! - the **silhouette distance** (pixels): the mean of the two terms of the image loss without
+//!   its Huber robustifier, the boundary vertices' distance to the mask's outline and the
+//!   outline's distance to the mesh's silhouette. It is what decides (lower is better): it moves
+//!   with sub-pixel changes of the outline, where IoU hardly does;
+//! - the **IoU** of the mesh's rasterised coverage (2 × 2 samples per pixel) with the mask's
+//!   coverage, `Σ min / Σ max`: a coarse, familiar sanity figure.
+//!
+//! The training template is usually simplified, so neither figure is zero for perfect weights;
+//! both are meant to compare weight sets on the same views.
+
+use std::fmt;
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+
+use super::{Frame, TrainData};
+use crate::losses::silhouette::{EdgeTable, view_terms};
+
+/// Sub-pixel samples per axis of the model's coverage in the IoU.
+const IOU_SAMPLES: u32 = 2;
+
+/// How well one weight set explains a set of views.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ValidationScore {
+    /// Mean distance of the boundary vertices to the mask outline (pixels).
+    pub boundary_px: f64,
+    /// Mean distance of the mask outline to the mesh silhouette (pixels).
+    pub contour_px: f64,
+    /// `(boundary_px + contour_px) / 2`: the figure that ranks weight sets.
+    pub silhouette_px: f64,
+    /// Intersection over union of the rasterised mesh with the mask coverage.
+    pub iou: f64,
+    /// Views scored.
+    pub views: usize,
+}
+
+impl ValidationScore {
+    /// Whether `self` explains the views worse than `other` (a larger silhouette distance).
+    #[must_use]
+    pub fn is_worse_than(&self, other: &Self) -> bool {
+        self.silhouette_px > other.silhouette_px
+    }
+}
+
+impl fmt::Display for ValidationScore {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "silhouette {:.4} px (boundary {:.4}, contour {:.4}), IoU {:.5}",
+            self.silhouette_px, self.boundary_px, self.contour_px, self.iou
+        )
+    }
+}
+
+/// Validation scores of a finished run: the initial weights and the exported model, on the same
+/// views.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValidationReport {
+    /// The initial weights (bone heat or the capture's).
+    pub initial: ValidationScore,
+    /// The weights about to be exported.
+    pub model: ValidationScore,
+    /// Held-out frames scored (0: too few training frames to hold any out; the training frames
+    /// were scored instead).
+    pub held_out_frames: usize,
+}
+
+impl ValidationReport {
+    /// Whether the model explains the validation views worse than its initialisation.
+    #[must_use]
+    pub fn model_is_worse(&self) -> bool {
+        self.model.is_worse_than(&self.initial)
+    }
+
+    /// The guard every command that trains applies before writing a model: a model worse than
+    /// its initialisation is refused (`refuse`), or let through with the refusal's message as a
+    /// warning (`Ok(Some(..))`).
+    pub fn guard(&self, refuse: bool) -> Result<Option<WorseThanInitial>, WorseThanInitial> {
+        if !self.model_is_worse() {
+            return Ok(None);
+        }
+        let worse = WorseThanInitial {
+            model_px: self.model.silhouette_px,
+            initial_px: self.initial.silhouette_px,
+            held_out_frames: self.held_out_frames,
+        };
+        if refuse { Err(worse) } else { Ok(Some(worse)) }
+    }
+}
+
+/// A trained model explains the validation silhouettes worse than its initial weights.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "the trained model explains the validation silhouettes ({held_out_frames} held-out frames; \
+     0: the training frames) worse than its initial weights: {model_px:.4} px against \
+     {initial_px:.4} px mean distance to the mask outlines"
+)]
+pub struct WorseThanInitial {
+    /// The model's silhouette distance (pixels).
+    pub model_px: f64,
+    /// The initial weights' silhouette distance (pixels).
+    pub initial_px: f64,
+    /// Held-out frames scored.
+    pub held_out_frames: usize,
+}
+
+/// Which of `n` training frames [`hold_out`] takes for `count` validation frames: the middle
+/// of each of `count` equal spans; none when fewer than four frames per held-out frame remain.
+#[must_use]
+pub fn held_out_indices(n: usize, count: usize) -> Vec<usize> {
+    let count = count.min(n / 4);
+    (0..count).map(|i| (2 * i + 1) * n / (2 * count)).collect()
+}
+
+/// Moves the frames [`held_out_indices`] picks out of `data.frames` and returns them (none:
+/// the caller validates on the training frames).
+pub(crate) fn hold_out(data: &mut TrainData, count: usize) -> Vec<Frame> {
+    let picked = held_out_indices(data.frames.len(), count);
+    let mut held: Vec<Frame> = picked
+        .iter()
+        .rev()
+        .map(|&i| data.frames.remove(i))
+        .collect();
+    held.reverse();
+    held
+}
+
+/// Scores dense weights `weights` (`[frames.len()][V][J]`, one set per frame, row-major) on
+/// every view of `frames`, posing `data`'s template by linear blend skinning.
+pub(crate) fn score(
+    data: &TrainData,
+    frames: &[Frame],
+    weights: &[f32],
+    edges: &EdgeTable,
+) -> ValidationScore {
+    let t = &data.template;
+    let (v, j) = (t.vertex_count(), data.skeleton.len());
+    debug_assert_eq!(weights.len(), frames.len() * v * j);
+    struct ViewScore {
+        boundary: f64,
+        boundary_count: usize,
+        contour: f64,
+        contour_weight: f64,
+        intersection: f64,
+        union: f64,
+    }
+    let per_view: Vec<ViewScore> = frames
+        .par_iter()
+        .enumerate()
+        .flat_map(|(b, frame)| {
+            let posed = pose(
+                &t.positions,
+                &weights[b * v * j..(b + 1) * v * j],
+                &frame.skinning,
+            );
+            frame
+                .views
+                .par_iter()
+                .map(move |view| {
+                    let terms =
+                        view_terms(&view.camera, &view.target, &posed, &t.triangles, edges, 1.0);
+                    let mesh =
+                        crate::raster::coverage(&view.camera, &posed, &t.triangles, IOU_SAMPLES);
+                    let (mut intersection, mut union) = (0.0f64, 0.0f64);
+                    for (&a, &b) in mesh.iter().zip(view.coverage.iter()) {
+                        intersection += f64::from(a.min(b));
+                        union += f64::from(a.max(b));
+                    }
+                    ViewScore {
+                        boundary: terms.boundary_distance,
+                        boundary_count: terms.boundary_count,
+                        contour: terms.contour_distance,
+                        contour_weight: terms.contour_weight,
+                        intersection,
+                        union,
+                    }
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let sum = |f: fn(&ViewScore) -> f64| per_view.iter().map(f).sum::<f64>();
+    let count = per_view.iter().map(|s| s.boundary_count).sum::<usize>();
+    let boundary_px = sum(|s| s.boundary) / count.max(1) as f64;
+    let contour_px = sum(|s| s.contour) / sum(|s| s.contour_weight).max(1e-12);
+    ValidationScore {
+        boundary_px,
+        contour_px,
+        silhouette_px: 0.5 * (boundary_px + contour_px),
+        iou: sum(|s| s.intersection) / sum(|s| s.union).max(1e-12),
+        views: per_view.len(),
+    }
+}
+
+/// Linear blend skinning of `rest` with weights `w` (`[V][J]`) and `skinning` matrices.
+fn pose(rest: &[Vec3], w: &[f32], skinning: &[Mat4]) -> Vec<Vec3> {
+    let j = skinning.len();
+    rest.iter()
+        .zip(w.chunks_exact(j.max(1)))
+        .map(|(&p, row)| {
+            row.iter()
+                .zip(skinning)
+                .filter(|(w, _)| **w != 0.0)
+                .map(|(&w, m)| m.transform_point3(p) * w)
+                .sum()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pose_blends_the_transformed_points() {
+        let rest = [Vec3::new(1.0, 2.0, 3.0)];
+        let skinning = [
+            Mat4::from_translation(Vec3::X),
+            Mat4::from_rotation_z(std::f32::consts::FRAC_PI_2),
+        ];
+        let got = pose(&rest, &[0.25, 0.75], &skinning);
+        let want = Vec3::new(2.0, 2.0, 3.0) * 0.25 + Vec3::new(-2.0, 1.0, 3.0) * 0.75;
+        assert!((got[0] - want).length() < 1e-6, "{got:?} vs {want}");
+    }
+
+    #[test]
+    fn worse_means_a_larger_silhouette_distance() {
+        let a = ValidationScore {
+            silhouette_px: 0.3,
+            iou: 0.9,
+            ..ValidationScore::default()
+        };
+        let b = ValidationScore {
+            silhouette_px: 0.4,
+            iou: 0.95,
+            ..ValidationScore::default()
+        };
+        assert!(b.is_worse_than(&a) && !a.is_worse_than(&b) && !a.is_worse_than(&a));
+    }
+}
