@@ -86,7 +86,8 @@ pub(crate) fn lbs(
     apply_matrix(&m, p, n, t)
 }
 
-fn apply_matrix(m: &Mat4, p: Vec3, n: Vec3, t: Vec4) -> Skinned {
+/// Applies a blended skinning matrix to a position, normal (cofactor) and tangent.
+pub(crate) fn apply_matrix(m: &Mat4, p: Vec3, n: Vec3, t: Vec4) -> Skinned {
     let tan = m.transform_vector3(t.truncate()).normalize_or_zero();
     Skinned {
         position: m.transform_point3(p),
