@@ -14,7 +14,11 @@ use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, WeightsJob, check_attr};
 use crate::model::SkinNet;
-use crate::skinning::{Method, apply_matrix, dqs};
+use crate::kernels::blend;
+use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
+
+/// Residual weights smaller than this are exactly zero (2⁻¹⁰⁰ ≈ 7.9e-31).
+const RESIDUAL_FLUSH: f32 = 7.888_609e-31;
 
 /// The nodes' state for one frame: SkinNet's weights at the nodes, their change from the
 /// bind-pose base, and the residual skinning matrix of every node. Buffers are allocated once
@@ -74,6 +78,7 @@ impl FastFrame {
         .run(scratch)?;
         let j = self.joints;
         let mats = frame.palette().matrices();
+        let kernel = mesh.kernel();
         for (n, (&v, (w, r))) in mesh
             .node_vertices()
             .iter()
@@ -88,10 +93,17 @@ impl FastFrame {
             for b in mesh.base_of(v as usize) {
                 r[b.index as usize] -= b.weight;
             }
-            self.node_matrices[n] = r
-                .iter()
-                .zip(mats)
-                .fold(Mat4::ZERO, |acc, (&rj, m)| acc + *m * rj);
+            // Residuals below 2⁻¹⁰⁰ are zero: their products would be subnormal floats, which
+            // cost a microcode assist per use on Intel cores (see `activation::EXP_TAIL`).
+            for x in r.iter_mut() {
+                if x.abs() < RESIDUAL_FLUSH {
+                    *x = 0.0;
+                }
+            }
+            let mut m = Mat4::ZERO;
+            let nonzero = r.iter().enumerate().filter(|(_, x)| **x != 0.0);
+            blend(kernel, &mut m, mats, nonzero.map(|(j, &x)| (j, x)));
+            self.node_matrices[n] = m;
         }
         self.pose = frame.generation();
         Ok(())
@@ -251,35 +263,50 @@ impl FastSkinJob<'_> {
         let dense = &mut dense[..j];
         let mut strongest = [Influence::default(); MAX_INFLUENCES];
         let strongest = &mut strongest[..self.influences];
+        let kernel = mesh.kernel();
+        let node_mats = nodes.node_matrices();
         for i in 0..self.out_positions.len() {
             let v = self.first_vertex + i;
-            let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
-            let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
-            let s = match self.method {
+            match self.method {
                 Method::Lbs => {
+                    // LBS is linear in the weights: the base joints' matrices plus the nodes'
+                    // residual matrices give Σ_j w_vj M_j without forming w_v.
                     let mut m = Mat4::ZERO;
-                    for b in mesh.base_of(v) {
-                        m += mats[b.index as usize] * b.weight;
+                    let base = mesh.base_of(v).iter();
+                    blend(kernel, &mut m, mats, base.map(|b| (b.index as usize, b.weight)));
+                    let interp = mesh.interp_of(v).iter();
+                    blend(
+                        kernel,
+                        &mut m,
+                        node_mats,
+                        interp.map(|a| (a.index as usize, a.weight)),
+                    );
+                    self.out_positions[i] = m.transform_point3(rest[v]);
+                    if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals)
+                    {
+                        o[i] = lbs_normal(&m, r[v]);
                     }
-                    let node_mats = nodes.node_matrices();
-                    for a in mesh.interp_of(v) {
-                        m += node_mats[a.index as usize] * a.weight;
+                    if let (Some(o), Some(r)) =
+                        (self.out_tangents.as_deref_mut(), self.rest_tangents)
+                    {
+                        o[i] = lbs_tangent(&m, r[v]);
                     }
-                    apply_matrix(&m, rest[v], n, t)
                 }
                 Method::Dqs => {
+                    let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
+                    let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
                     nodes.dense_weights(mesh, v, dense);
                     strongest_influences(dense, strongest);
                     let infl = strongest.iter().map(|e| (e.index as usize, e.weight));
-                    dqs(mats, dq, infl, rest[v], n, t)
+                    let s = dqs(mats, dq, infl, rest[v], n, t);
+                    self.out_positions[i] = s.position;
+                    if let Some(o) = self.out_normals.as_deref_mut() {
+                        o[i] = s.normal;
+                    }
+                    if let Some(o) = self.out_tangents.as_deref_mut() {
+                        o[i] = s.tangent;
+                    }
                 }
-            };
-            self.out_positions[i] = s.position;
-            if let Some(o) = self.out_normals.as_deref_mut() {
-                o[i] = s.normal;
-            }
-            if let Some(o) = self.out_tangents.as_deref_mut() {
-                o[i] = s.tangent;
             }
             if let Some(o) = self.out_weights.as_deref_mut() {
                 nodes.dense_weights(mesh, v, &mut o[i * j..(i + 1) * j]);

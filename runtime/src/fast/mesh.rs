@@ -14,6 +14,7 @@ use crate::bind::{BoundMesh, MAX_BIND_VERTICES};
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, WeightsJob};
+use crate::kernels::Kernel;
 use crate::model::SkinNet;
 
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
@@ -21,6 +22,9 @@ static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 /// Vertices per SkinNet batch when the bind-pose weights are computed (bounds the memory of
 /// that step to `BASE_CHUNK × J` floats).
 const BASE_CHUNK: usize = 4096;
+
+/// Interpolation weights below this fraction of the nearest node's are dropped.
+const INTERPOLATION_FLUSH: f32 = 1e-6;
 
 /// What binding found, for reports and checks.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -37,6 +41,7 @@ pub struct FastMesh {
     model_id: u64,
     id: u64,
     joints: usize,
+    kernel: Kernel,
     rest: Vec<Vec3>,
     options: FastOptions,
     node_vertices: Vec<u32>,
@@ -91,6 +96,15 @@ fn interpolation_weights(found: &[(f32, u32)], rule: Interpolation, out: &mut [I
                     *wi = 1.0 / (d(i) * d(i));
                 }
             }
+        }
+    }
+    // Negligible weights are zero: their products with small residuals would be subnormal
+    // (slow on Intel cores; see `activation::EXP_TAIL`).
+    // The nearest node has the largest weight under both rules.
+    let floor = INTERPOLATION_FLUSH * w[0];
+    for wi in w.iter_mut().take(m) {
+        if *wi < floor {
+            *wi = 0.0;
         }
     }
     let mut sum: f32 = w[..m].iter().sum();
@@ -241,6 +255,7 @@ impl FastMesh {
             model_id: model.id(),
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             joints: j,
+            kernel: model.kernel(),
             rest: positions.to_vec(),
             options: FastOptions {
                 nodes: nodes.len(),
@@ -321,6 +336,11 @@ impl FastMesh {
     pub(crate) fn interp_of(&self, v: usize) -> &[Influence] {
         let k = self.options.neighbours;
         &self.interp[v * k..(v + 1) * k]
+    }
+
+    /// The kernel of the model it was bound to (blends the skinning matrices).
+    pub(crate) fn kernel(&self) -> Kernel {
+        self.kernel
     }
 
     pub(crate) fn node_mesh(&self) -> &BoundMesh {

@@ -5,7 +5,7 @@
 use core::arch::x86_64::*;
 
 use super::{LayerArgs, MR, TILE};
-use crate::activation::{Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG2E};
+use crate::activation::{Act, EXP_MAX, EXP_MIN, EXP_P, EXP_TAIL, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E};
 
 /// Vectors per vertex block (16 vertices).
 const NV: usize = 2;
@@ -44,7 +44,9 @@ fn exp_ps(z: __m256) -> __m256 {
 #[target_feature(enable = "avx2,fma")]
 fn log1p_ps(y: __m256) -> __m256 {
     let s = _mm256_div_ps(y, _mm256_add_ps(y, _mm256_set1_ps(2.0)));
-    let z = _mm256_mul_ps(s, s);
+    // Clamped before squaring so tiny arguments never underflow (see `LOG1P_S_MIN`).
+    let sc = _mm256_max_ps(s, _mm256_set1_ps(LOG1P_S_MIN));
+    let z = _mm256_mul_ps(sc, sc);
     let mut q = _mm256_set1_ps(LOG1P_Q[0]);
     for &c in &LOG1P_Q[1..] {
         q = _mm256_fmadd_ps(q, z, _mm256_set1_ps(c));
@@ -55,11 +57,12 @@ fn log1p_ps(y: __m256) -> __m256 {
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn softplus_ps(x: __m256, beta: __m256, inv_beta: __m256) -> __m256 {
-    let e = exp_ps(_mm256_sub_ps(
-        _mm256_setzero_ps(),
-        _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x)),
-    ));
-    _mm256_fmadd_ps(log1p_ps(e), inv_beta, _mm256_max_ps(x, _mm256_setzero_ps()))
+    let a = _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x));
+    let e = exp_ps(_mm256_sub_ps(_mm256_setzero_ps(), a));
+    // The tail beyond `EXP_TAIL` is exactly zero (a subnormal otherwise; see `activation`).
+    let keep = _mm256_cmp_ps::<_CMP_LE_OQ>(a, _mm256_set1_ps(EXP_TAIL));
+    let tail = _mm256_and_ps(keep, _mm256_mul_ps(log1p_ps(e), inv_beta));
+    _mm256_add_ps(tail, _mm256_max_ps(x, _mm256_setzero_ps()))
 }
 
 /// # Safety
@@ -147,7 +150,9 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
             let mut sum = _mm256_setzero_ps();
             for j in 0..rows {
                 let at = b.add(j * TILE + W * c);
-                let e = exp_ps(_mm256_sub_ps(_mm256_loadu_ps(at), m));
+                let z = _mm256_sub_ps(_mm256_loadu_ps(at), m);
+                let keep = _mm256_cmp_ps::<_CMP_GE_OQ>(z, _mm256_set1_ps(-EXP_TAIL));
+                let e = _mm256_and_ps(keep, exp_ps(z));
                 sum = _mm256_add_ps(sum, e);
                 _mm256_storeu_ps(at, e);
             }

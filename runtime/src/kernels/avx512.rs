@@ -5,7 +5,9 @@
 use core::arch::x86_64::*;
 
 use super::{LayerArgs, MR, TILE};
-use crate::activation::{Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG2E};
+use crate::activation::{
+    Act, EXP_MAX, EXP_MIN, EXP_P, EXP_TAIL, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E,
+};
 
 const NV: usize = TILE / 16;
 
@@ -39,7 +41,9 @@ fn exp_ps(z: __m512) -> __m512 {
 #[target_feature(enable = "avx512f")]
 fn log1p_ps(y: __m512) -> __m512 {
     let s = _mm512_div_ps(y, _mm512_add_ps(y, _mm512_set1_ps(2.0)));
-    let z = _mm512_mul_ps(s, s);
+    // Clamped before squaring so tiny arguments never underflow (see `LOG1P_S_MIN`).
+    let sc = _mm512_max_ps(s, _mm512_set1_ps(LOG1P_S_MIN));
+    let z = _mm512_mul_ps(sc, sc);
     let mut q = _mm512_set1_ps(LOG1P_Q[0]);
     for &c in &LOG1P_Q[1..] {
         q = _mm512_fmadd_ps(q, z, _mm512_set1_ps(c));
@@ -50,11 +54,12 @@ fn log1p_ps(y: __m512) -> __m512 {
 #[inline]
 #[target_feature(enable = "avx512f")]
 fn softplus_ps(x: __m512, beta: __m512, inv_beta: __m512) -> __m512 {
-    let e = exp_ps(_mm512_sub_ps(
-        _mm512_setzero_ps(),
-        _mm512_mul_ps(beta, _mm512_abs_ps(x)),
-    ));
-    _mm512_fmadd_ps(log1p_ps(e), inv_beta, _mm512_max_ps(x, _mm512_setzero_ps()))
+    let a = _mm512_mul_ps(beta, _mm512_abs_ps(x));
+    let e = exp_ps(_mm512_sub_ps(_mm512_setzero_ps(), a));
+    // The tail beyond `EXP_TAIL` is exactly zero (a subnormal otherwise; see `activation`).
+    let keep = _mm512_cmp_ps_mask::<_CMP_LE_OQ>(a, _mm512_set1_ps(EXP_TAIL));
+    let tail = _mm512_maskz_mul_ps(keep, log1p_ps(e), inv_beta);
+    _mm512_add_ps(tail, _mm512_max_ps(x, _mm512_setzero_ps()))
 }
 
 /// # Safety
@@ -137,7 +142,9 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
             let mut sum = _mm512_setzero_ps();
             for j in 0..rows {
                 let at = b.add(j * TILE + 16 * c);
-                let e = exp_ps(_mm512_sub_ps(_mm512_loadu_ps(at), m));
+                let z = _mm512_sub_ps(_mm512_loadu_ps(at), m);
+                let keep = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(z, _mm512_set1_ps(-EXP_TAIL));
+                let e = _mm512_maskz_mov_ps(keep, exp_ps(z));
                 sum = _mm512_add_ps(sum, e);
                 _mm512_storeu_ps(at, e);
             }

@@ -31,9 +31,12 @@
 //! | `skf:FILE` | `ours` | SkinNet's pose-dependent weights from a `.skf`, by `skinfield_runtime` | LBS |
 //! | `oracle` | `oracle` | the ground-truth deformer's own static weights | LBS |
 //! | `oracle-dqs` | `oracle-dqs` | the same | DQS |
+//!
+//! `trainer eval --fast [N]` adds the runtime's fast path of every `skf:FILE` row ([`fast`]).
 
 pub mod bvh;
 pub mod distance;
+pub mod fast;
 pub mod posing;
 pub mod static_weights;
 pub mod surface;
@@ -331,7 +334,7 @@ impl PreparedSkinning {
 
 /// Reads a `.skf` and checks that its skeleton is the capture's (same joint names, same order:
 /// SkinNet's outputs and pose features are per joint in file order).
-fn load_skinnet(path: &std::path::Path, capture: &Capture) -> Result<SkinNetModel, EvalError> {
+pub(crate) fn load_skinnet(path: &std::path::Path, capture: &Capture) -> Result<SkinNetModel, EvalError> {
     let bytes = read_skf_file(path)?;
     let model = SkinNetModel::from_skf(&bytes).map_err(|e| EvalError::Skf {
         path: path.to_owned(),
