@@ -1,62 +1,201 @@
-//! One SkinNet training step (forward, loss, backward, Adam) with the fused Softplus op against
-//! the composite candle version, measured side by side in the same run.
+//! One SkinNet training step — forward, a loss on the skinned positions, backward, Adam — with
+//! the fused op against candle's graph (with the fused Softplus, the step before the fused op
+//! existed), side by side in the same run, on one and two threads; and the MLP part alone
+//! (forward + backward) against the runtime's inference forward of the same network.
 //!
-//! `cargo bench --bench skinnet_step`: 4 poses × 1024 canonical points, J = 24, the paper's
-//! architecture (≈ 0.49 MFLOP per point forward).
+//! `cargo bench -p skinfield-benches --bench skinnet_step`: 4 frames × 2,500 rows, J = 24, the
+//! paper's architecture. Throughputs are printed by criterion as `elem/s`, where an element is
+//! one floating-point operation of the measured work, so `Gelem/s` reads as GFLOP/s.
 
 use candle_core::{Device, Tensor};
-use criterion::{Criterion, criterion_group, criterion_main};
-use glam::Vec3;
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use glam::{Mat4, Quat, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use skinfield_formats::skf::ModelConfig;
+use skinfield_formats::skf::{ModelConfig, Net};
+use skinfield_runtime::{BoundMesh, FrameState, Scratch, SkinNetModel, WeightsJob};
+use skinfield_trainer::losses::lbs::{lbs, rest_homogeneous, skinning_tensor};
 use skinfield_trainer::optim::{Adam, AdamConfig};
-use skinfield_trainer::skinnet::{Activation, SkinNet, encode_positions};
+use skinfield_trainer::skinnet::export::to_skf_model;
+use skinfield_trainer::skinnet::{Activation, Backend, SkinNet, encode_positions};
 
 const JOINTS: u32 = 24;
 const FRAMES: usize = 4;
-const POINTS: usize = 1024;
+const POINTS: usize = 2500;
 
-fn step(c: &mut Criterion) {
+/// Floating-point operations of one forward pass over `rows` rows with `vertices` distinct
+/// positions and `frames` poses, as the fused op executes it: the position and pose parts of the
+/// input layers once per vertex and once per frame, the rest per row.
+fn forward_flops(config: &ModelConfig, frames: usize, vertices: usize) -> f64 {
+    let rows = (frames * vertices) as f64;
+    let (p, q) = (config.position_width(), config.pose_width());
+    let skip = config.skip_layer as usize;
+    config
+        .layer_shapes(Net::Skin)
+        .enumerate()
+        .map(|(i, (out, inp))| {
+            let out = out as f64;
+            if i == 0 || (i == skip && i > 0) {
+                let hidden = (inp - p - q) as f64;
+                2.0 * out * (rows * hidden + vertices as f64 * p as f64 + frames as f64 * q as f64)
+            } else {
+                2.0 * out * inp as f64 * rows
+            }
+        })
+        .sum()
+}
+
+struct Inputs {
+    config: ModelConfig,
+    points: Vec<Vec3>,
+    encoded: Tensor,
+    poses: Tensor,
+    skinning: Tensor,
+    rest: Tensor,
+    target: Tensor,
+}
+
+fn inputs() -> Inputs {
     let config = ModelConfig::vinecs(JOINTS, [-1.0; 3], [1.0; 3]);
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let pts: Vec<Vec3> = (0..POINTS)
+    let mut unit = || rng.random_range(-1.0f32..1.0);
+    let points: Vec<Vec3> = (0..POINTS)
+        .map(|_| Vec3::new(unit(), unit(), unit()))
+        .collect();
+    let encoded = encode_positions(&config, &points, &Device::Cpu).unwrap();
+    let q = config.pose_width();
+    let pose_rows: Vec<f32> = (0..FRAMES * q).map(|_| unit()).collect();
+    let poses = Tensor::from_vec(pose_rows, (FRAMES, q), &Device::Cpu).unwrap();
+    let mats: Vec<Vec<Mat4>> = (0..FRAMES)
         .map(|_| {
-            Vec3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
+            (0..JOINTS)
+                .map(|_| {
+                    Mat4::from_rotation_translation(
+                        Quat::from_euler(glam::EulerRot::XYZ, unit(), unit(), unit()),
+                        Vec3::new(unit(), unit(), unit()) * 0.1,
+                    )
+                })
+                .collect()
         })
         .collect();
-    let enc = encode_positions(&config, &pts, &Device::Cpu).unwrap();
-    let poses: Vec<f32> = (0..FRAMES * 3 * JOINTS as usize)
-        .map(|_| rng.random_range(-1.0..1.0))
-        .collect();
-    let poses = Tensor::from_vec(poses, (FRAMES, 3 * JOINTS as usize), &Device::Cpu).unwrap();
-    let target: Vec<f32> = (0..FRAMES * POINTS * JOINTS as usize)
-        .map(|_| rng.random_range(0.0..1.0))
-        .collect();
-    let target = Tensor::from_vec(target, (FRAMES, POINTS, JOINTS as usize), &Device::Cpu).unwrap();
-    let mut group = c.benchmark_group("skinnet_train_step_4x1024");
-    group.sample_size(20);
-    for (name, act) in [
-        ("fused_softplus", Activation::Fused),
-        ("composite_softplus", Activation::Composite),
-    ] {
-        let (net, varmap) = SkinNet::seeded(config, 7, 1.0).unwrap();
-        let net = net.with_activation(act);
-        let mut opt = Adam::from_varmap(&varmap, AdamConfig::default()).unwrap();
-        group.bench_function(name, |b| {
-            b.iter(|| {
-                let w = net.forward(&enc, &poses).unwrap();
-                let loss = (w - &target).unwrap().sqr().unwrap().mean_all().unwrap();
-                opt.backward_step(&loss).unwrap();
+    let skinning = skinning_tensor(&mats, &Device::Cpu).unwrap();
+    let rest = rest_homogeneous(&points, &Device::Cpu).unwrap();
+    let target: Vec<f32> = (0..FRAMES * POINTS * 3).map(|_| unit()).collect();
+    let target = Tensor::from_vec(target, (FRAMES, POINTS, 3), &Device::Cpu).unwrap();
+    Inputs {
+        config,
+        points,
+        encoded,
+        poses,
+        skinning,
+        rest,
+        target,
+    }
+}
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+}
+
+fn step(c: &mut Criterion) {
+    let x = inputs();
+    let mut group = c.benchmark_group("skinnet_train_step_4x2500");
+    group.sample_size(10);
+    for threads in [1, 2] {
+        let pool = pool(threads);
+        for (name, backend) in [
+            ("fused", Backend::Fused),
+            ("candle", Backend::Candle(Activation::SoftplusOp)),
+        ] {
+            let (net, varmap) = SkinNet::seeded(x.config, 7, 1.0).unwrap();
+            let net = net.with_backend(backend);
+            let mut opt = Adam::from_varmap(&varmap, AdamConfig::default()).unwrap();
+            group.bench_function(format!("{name}/{threads}t"), |b| {
+                b.iter(|| {
+                    pool.install(|| {
+                        let w = net.forward(&x.encoded, &x.poses).unwrap();
+                        let posed = lbs(&w, &x.skinning, &x.rest).unwrap();
+                        let loss = (posed - &x.target)
+                            .unwrap()
+                            .sqr()
+                            .unwrap()
+                            .sum(2)
+                            .unwrap()
+                            .sqrt()
+                            .unwrap()
+                            .mean_all()
+                            .unwrap();
+                        opt.backward_step(&loss).unwrap();
+                    });
+                });
             });
-        });
+        }
     }
     group.finish();
 }
 
-criterion_group!(benches, step);
+fn mlp(c: &mut Criterion) {
+    let x = inputs();
+    let forward = forward_flops(&x.config, FRAMES, POINTS);
+    let mut group = c.benchmark_group("skinnet_mlp_4x2500");
+    group.sample_size(10);
+    let (net, _varmap) = SkinNet::seeded(x.config, 7, 1.0).unwrap();
+    for threads in [1, 2] {
+        let pool = pool(threads);
+        // Forward + backward of the fused op alone: the backward executes twice the forward's
+        // products (∂W and ∂H per layer; the first layer needs no ∂H, which this count ignores).
+        group.throughput(Throughput::Elements((3.0 * forward) as u64));
+        group.bench_function(format!("fused_forward_backward/{threads}t"), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    let w = net.forward(&x.encoded, &x.poses).unwrap();
+                    w.sum_all().unwrap().backward().unwrap()
+                })
+            });
+        });
+        group.throughput(Throughput::Elements(forward as u64));
+        group.bench_function(format!("fused_forward/{threads}t"), |b| {
+            b.iter(|| pool.install(|| net.forward(&x.encoded, &x.poses).unwrap()));
+        });
+    }
+    // The runtime's inference kernels on the same network: FRAMES frames of POINTS vertices.
+    // (The network's cost does not depend on the pose values, so any FRAMES poses do.)
+    let mut r = skinfield_benches::rng(3);
+    let skeleton = skinfield_benches::skeleton(JOINTS as usize, &mut r);
+    let bytes = to_skf_model(&net, &skeleton).unwrap().to_bytes().unwrap();
+    let model = SkinNetModel::from_skf(&bytes).unwrap();
+    let mesh = BoundMesh::bind(&model, &x.points).unwrap();
+    let frames: Vec<FrameState> = (0..FRAMES)
+        .map(|_| {
+            let mut f = FrameState::new(&model);
+            let pose = skinfield_benches::random_pose(model.skeleton(), &mut r, 0.6);
+            f.set_pose(&model, &pose).unwrap();
+            f
+        })
+        .collect();
+    let mut scratch = Scratch::new(&model);
+    let mut out = vec![0.0f32; POINTS * JOINTS as usize];
+    group.throughput(Throughput::Elements(forward as u64));
+    group.bench_function("runtime_forward/1t", |b| {
+        b.iter(|| {
+            for f in &frames {
+                WeightsJob {
+                    model: &model,
+                    mesh: &mesh,
+                    frame: f,
+                    first_vertex: 0,
+                    out_weights: &mut out,
+                }
+                .run(&mut scratch)
+                .unwrap();
+            }
+        });
+    });
+    group.finish();
+}
+
+criterion_group!(benches, step, mlp);
 criterion_main!(benches);

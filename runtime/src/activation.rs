@@ -11,19 +11,24 @@
 /// (see [`EXP_TAIL`]), and `exp(-72) ≈ 5e-32` keeps every intermediate of `exp` and of
 /// `log1p` of its result a normal float.
 pub const EXP_MIN: f32 = -72.0;
-/// Smallest `s` squared inside `log1p`: `s²` of a smaller `s` would underflow to a subnormal;
-/// `Q(s²)` is `1 + O(s²)`, so squaring `max(s, 2⁻⁶⁰)` changes nothing at f32 precision.
-pub const LOG1P_S_MIN: f32 = 8.673_617e-19;
-/// Tail cut: where `β|x|` (Softplus) or `max − x` (softmax) exceeds this, `exp` is below
-/// `e^-72 ≈ 5e-32` and the term is taken as exactly zero. Kept, it would end as a subnormal
-/// float (`e^-87 / β ≈ 1e-40` for β = 100: about half of all Softplus outputs), and every
-/// arithmetic use of a subnormal costs a ~100-cycle microcode assist on Intel cores: the exact
-/// MLP ran 60× slower there. The dropped amount is below 5e-32 absolute; every kept value is
-/// normal for β up to 4·10⁶.
+/// Tail cut of softmax: where `max − x` exceeds this, `exp` is below `e^-72 ≈ 5e-32` and the
+/// weight is taken as exactly zero. Kept, it would end as a subnormal float within a few more
+/// units, and every arithmetic use of a subnormal costs a ~100-cycle microcode assist on Intel
+/// cores (the exact MLP ran 60× slower before the tails were cut). Softplus has its own clamp,
+/// [`SOFTPLUS_EXP_MIN`].
 pub const EXP_TAIL: f32 = 72.0;
 /// Upper clamp of the exp argument (only softmax needs positive arguments; it never passes any,
 /// because it subtracts the maximum first).
 pub const EXP_MAX: f32 = 88.0;
+/// Lower clamp of Softplus's exp argument `−β|x|`. Below `e^−60 ≈ 9e-27` the tail
+/// `log1p(e)/β` is far below any value that matters, and stopping there keeps every
+/// intermediate of the polynomials a normal float: denormal operands cost x86 cores a
+/// microcode assist each, which made the SIMD Softplus slower than the matrix products around
+/// it when many units sat deep in the negative tail.
+pub const SOFTPLUS_EXP_MIN: f32 = -60.0;
+/// Lower clamp of `s` where the log1p polynomial squares it (`2^-50`): `s²` stays normal, and
+/// the polynomial is exactly 1 in f32 below it either way, so results do not change.
+pub const LOG1P_S_MIN: f32 = 8.881_784e-16;
 /// `log2(e)`.
 pub const LOG2E: f32 = core::f32::consts::LOG2_E;
 /// Cody–Waite split of `ln 2`: high part (exact in f32 with 9 bits of mantissa).
@@ -66,13 +71,19 @@ pub enum Act {
 /// Exact Softplus with sharpness `beta`, stable form (libm).
 #[must_use]
 pub fn softplus(x: f32, beta: f32) -> f32 {
-    let a = beta * x.abs();
-    let tail = if a <= EXP_TAIL {
-        libm::log1pf(libm::expf(-a)) / beta
+    x.max(0.0) + libm::log1pf(libm::expf((-beta * x.abs()).max(SOFTPLUS_EXP_MIN))) / beta
+}
+
+/// The slope of Softplus, `sigmoid(βx)` (exact, libm), evaluated from `e = exp(−β|x|)` so it
+/// neither overflows nor loses the tail: `1/(1 + e)` for `x ≥ 0`, `e/(1 + e)` below.
+#[must_use]
+pub fn softplus_slope(x: f32, beta: f32) -> f32 {
+    let e = libm::expf(-beta * x.abs());
+    if x >= 0.0 {
+        1.0 / (1.0 + e)
     } else {
-        0.0
-    };
-    x.max(0.0) + tail
+        e / (1.0 + e)
+    }
 }
 
 /// `exp(z)` for `z ≤ 0` by the kernels' polynomial (scalar mirror of the SIMD code).
@@ -105,13 +116,7 @@ pub fn log1p_poly(y: f32) -> f32 {
 /// Softplus by the kernels' polynomials.
 #[must_use]
 pub fn softplus_poly(x: f32, beta: f32) -> f32 {
-    let a = beta * x.abs();
-    let tail = if a <= EXP_TAIL {
-        log1p_poly(exp_poly(-a)) / beta
-    } else {
-        0.0
-    };
-    x.max(0.0) + tail
+    x.max(0.0) + log1p_poly(exp_poly((-beta * x.abs()).max(SOFTPLUS_EXP_MIN))) / beta
 }
 
 /// Softmax in place (exact; max subtracted first, so it never overflows; weights below
@@ -183,9 +188,10 @@ mod tests {
         }
         // Large arguments: no overflow, identity.
         assert_eq!(softplus(1e30, 100.0), 1e30);
-        // The far negative tail is exactly zero, not a subnormal.
-        assert_eq!(softplus_poly(-1e30, 100.0), 0.0);
-        assert_eq!(softplus(-1e30, 100.0), 0.0);
+        // exp's argument is clamped at −60, so the far negative tail is e^-60/β ≈ 9e-29
+        // instead of 0.
+        assert!(softplus_poly(-1e30, 100.0).abs() < 1e-28);
+        assert!(softplus(-1e30, 100.0).abs() < 1e-28);
     }
 
     #[test]

@@ -30,6 +30,7 @@ extern crate alloc;
 
 pub mod activation;
 pub mod bind;
+pub mod candidates;
 pub mod error;
 pub mod fast;
 pub mod frame;

@@ -2,7 +2,8 @@
 //! candle, export to `.skf`, and evaluation against ground truth.
 
 pub mod appearance;
-pub mod distance_transform;
+pub mod bilinear;
+pub mod candidates;
 pub mod eval;
 pub mod geodesic;
 pub mod heat;

@@ -4,6 +4,11 @@
 //! update, but keeps its moments private, so a checkpoint could not resume it exactly. This one
 //! exposes its state ([`Adam::state_tensors`], [`Adam::load_state_tensors`]) and visits its
 //! variables in name order, so a run is reproducible bit for bit.
+//!
+//! The update runs as one plain loop per variable (clip, both moments, bias correction and the
+//! step fused, each element computed in f64 and stored in the variable's dtype), not as a chain
+//! of candle ops: that chain allocated eight tensors per variable per step and cost 10–20 ms of
+//! a training iteration; the loop costs about a millisecond for SkinNet's 0.25 M parameters.
 
 use std::collections::HashMap;
 
@@ -38,11 +43,90 @@ impl Default for AdamConfig {
     }
 }
 
+/// The two moments of one variable, in its dtype.
+enum Moments {
+    F32 { m: Vec<f32>, v: Vec<f32> },
+    F64 { m: Vec<f64>, v: Vec<f64> },
+}
+
 struct Slot {
     name: String,
     var: Var,
-    m: Tensor,
-    v: Tensor,
+    moments: Moments,
+}
+
+/// One Adam update of `var` with gradient `grad` and moments `m`, `v` (all the same length).
+fn update<T: candle_core::WithDType>(
+    var: &Var,
+    grad: &Tensor,
+    m: &mut [T],
+    v: &mut [T],
+    c: &AdamConfig,
+    bias1: f64,
+    bias2: f64,
+) -> Result<()> {
+    let mut x = var.as_tensor().flatten_all()?.to_vec1::<T>()?;
+    let g = grad.flatten_all()?.to_vec1::<T>()?;
+    if g.len() != x.len() || m.len() != x.len() || v.len() != x.len() {
+        candle_core::bail!("adam: gradient or moments sized for another variable");
+    }
+    let clip = c.clip.unwrap_or(f64::INFINITY);
+    for (((x, g), m), v) in x.iter_mut().zip(&g).zip(m.iter_mut()).zip(v.iter_mut()) {
+        let g = g.to_f64().clamp(-clip, clip);
+        let mt = c.beta1 * m.to_f64() + (1.0 - c.beta1) * g;
+        let vt = c.beta2 * v.to_f64() + (1.0 - c.beta2) * g * g;
+        *m = T::from_f64(mt);
+        *v = T::from_f64(vt);
+        let step = c.lr * (m.to_f64() / bias1) / ((v.to_f64() / bias2).sqrt() + c.eps);
+        *x = T::from_f64(x.to_f64() - step);
+    }
+    var.set(&Tensor::from_vec(x, var.shape(), var.device())?)
+}
+
+impl Moments {
+    fn zeros(var: &Var) -> Result<Self> {
+        let n = var.elem_count();
+        Ok(match var.dtype() {
+            candle_core::DType::F32 => Self::F32 {
+                m: vec![0.0; n],
+                v: vec![0.0; n],
+            },
+            candle_core::DType::F64 => Self::F64 {
+                m: vec![0.0; n],
+                v: vec![0.0; n],
+            },
+            d => candle_core::bail!("adam: variables of dtype {d:?} are not supported"),
+        })
+    }
+
+    fn tensors(&self, var: &Var) -> Result<(Tensor, Tensor)> {
+        let (shape, dev) = (var.shape(), var.device());
+        Ok(match self {
+            Self::F32 { m, v } => (
+                Tensor::from_vec(m.clone(), shape, dev)?,
+                Tensor::from_vec(v.clone(), shape, dev)?,
+            ),
+            Self::F64 { m, v } => (
+                Tensor::from_vec(m.clone(), shape, dev)?,
+                Tensor::from_vec(v.clone(), shape, dev)?,
+            ),
+        })
+    }
+
+    fn from_tensors(var: &Var, m: &Tensor, v: &Tensor) -> Result<Self> {
+        let flat = |t: &Tensor| t.to_dtype(var.dtype())?.flatten_all();
+        Ok(match var.dtype() {
+            candle_core::DType::F32 => Self::F32 {
+                m: flat(m)?.to_vec1()?,
+                v: flat(v)?.to_vec1()?,
+            },
+            candle_core::DType::F64 => Self::F64 {
+                m: flat(m)?.to_vec1()?,
+                v: flat(v)?.to_vec1()?,
+            },
+            d => candle_core::bail!("adam: variables of dtype {d:?} are not supported"),
+        })
+    }
 }
 
 /// Adam over a fixed, named set of variables.
@@ -59,11 +143,9 @@ impl Adam {
         let slots = vars
             .into_iter()
             .map(|(name, var)| {
-                let z = var.as_tensor().zeros_like()?;
                 Ok(Slot {
                     name,
-                    m: z.clone(),
-                    v: z,
+                    moments: Moments::zeros(&var)?,
                     var,
                 })
             })
@@ -116,21 +198,12 @@ impl Adam {
             let Some(g) = grads.get(s.var.as_tensor()) else {
                 continue;
             };
-            // candle detaches the gradients of intermediate nodes but not those of variables:
-            // a variable's gradient still records the ops (and so the activations) of the step
-            // that produced it. Kept in the moments, every step's graph would stay alive
-            // through the chain m_t → m_{t−1} → …; measured on the demo, +17 MB per iteration.
-            let g = g.detach();
-            let g = match c.clip {
-                Some(l) => g.clamp(-l, l)?,
-                None => g,
-            };
-            s.m = ((&s.m * c.beta1)? + (&g * (1.0 - c.beta1))?)?;
-            s.v = ((&s.v * c.beta2)? + (g.sqr()? * (1.0 - c.beta2))?)?;
-            let m_hat = (&s.m / bias1)?;
-            let denom = ((&s.v / bias2)?.sqrt()? + c.eps)?;
-            let next = (s.var.as_tensor() - ((m_hat / denom)? * c.lr)?)?;
-            s.var.set(&next)?;
+            // The gradient is read into plain memory, so nothing of the step's graph (which
+            // candle leaves recorded on a variable's gradient) outlives it in the moments.
+            match &mut s.moments {
+                Moments::F32 { m, v } => update(&s.var, g, m, v, &c, bias1, bias2)?,
+                Moments::F64 { m, v } => update(&s.var, g, m, v, &c, bias1, bias2)?,
+            }
         }
         Ok(())
     }
@@ -146,8 +219,9 @@ impl Adam {
     pub fn state_tensors(&self) -> Result<HashMap<String, Tensor>> {
         let mut out = HashMap::new();
         for s in &self.slots {
-            out.insert(format!("adam.m.{}", s.name), s.m.clone());
-            out.insert(format!("adam.v.{}", s.name), s.v.clone());
+            let (m, v) = s.moments.tensors(&s.var)?;
+            out.insert(format!("adam.m.{}", s.name), m);
+            out.insert(format!("adam.v.{}", s.name), v);
         }
         // Two u32 halves: safetensors and candle have no u64 scalar that survives every backend.
         let step = [(self.step & 0xffff_ffff) as u32, (self.step >> 32) as u32];
@@ -172,8 +246,7 @@ impl Adam {
             if m.shape() != s.var.shape() || v.shape() != s.var.shape() {
                 candle_core::bail!("optimiser state for `{}` has the wrong shape", s.name);
             }
-            s.m = m.to_dtype(s.var.dtype())?;
-            s.v = v.to_dtype(s.var.dtype())?;
+            s.moments = Moments::from_tensors(&s.var, m, v)?;
         }
         let step = get("adam.step")?.to_vec1::<u32>()?;
         if step.len() != 2 {

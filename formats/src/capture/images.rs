@@ -30,14 +30,21 @@ pub struct CaptureImage {
 }
 
 /// A foreground mask, row-major from the top-left pixel.
+///
+/// A mask file may be binary (0 and 255) or carry the subject's *coverage* of each pixel (grey
+/// level / 255, as an anti-aliased or supersampled render writes it). Coverage places the
+/// outline to a fraction of a pixel: its 50 % level is where the subject's edge crosses the
+/// pixel grid, which a binary mask can only place to within half a pixel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CaptureMask {
     /// Width in pixels.
     pub width: u32,
     /// Height in pixels.
     pub height: u32,
-    /// `width × height` flags, true on the subject.
+    /// `width × height` flags, true on the subject (coverage above one half).
     pub inside: Vec<bool>,
+    /// `width × height` coverage in `[0, 1]` (a binary mask gives 0 and 1).
+    pub coverage: Vec<f32>,
 }
 
 /// sRGB transfer function, linear → encoded, both in [0, 1].
@@ -171,13 +178,16 @@ fn read_exr(path: &Path, width: u32, height: u32) -> Result<CaptureImage, Captur
     Ok(CaptureImage { width, height, rgb })
 }
 
-/// Reads a mask PNG that must be `width × height`; grey > 127 is foreground.
+/// Reads a mask PNG that must be `width × height`: grey level / 255 (or / 65535 for 16-bit
+/// files) is the coverage, above one half is foreground.
 pub fn read_mask(path: &Path, width: u32, height: u32) -> Result<CaptureMask, CaptureError> {
-    let img = decode_png(path, width, height)?.to_luma8();
+    let img = decode_png(path, width, height)?.to_luma16();
+    let coverage: Vec<f32> = img.pixels().map(|p| f32::from(p[0]) / 65535.0).collect();
     Ok(CaptureMask {
         width,
         height,
-        inside: img.pixels().map(|p| p[0] > 127).collect(),
+        inside: coverage.iter().map(|&c| c > 0.5).collect(),
+        coverage,
     })
 }
 
@@ -259,15 +269,22 @@ pub fn write_image_exr(
     write_bytes(path, &out.into_inner())
 }
 
-/// Writes a mask as an 8-bit grey PNG (255 inside, 0 outside), atomically.
+/// Writes a mask as an 8-bit grey PNG of its coverage (`round(255·c)`, values clamped to
+/// [0, 1]; a binary mask is 0 and 255), atomically.
 pub fn write_mask_png(
     path: &Path,
     width: u32,
     height: u32,
-    inside: &[bool],
+    coverage: &[f32],
 ) -> Result<(), CaptureError> {
-    check_len(path, width, height, inside.len())?;
-    let bytes: Vec<u8> = inside.iter().map(|&b| if b { 255 } else { 0 }).collect();
+    check_len(path, width, height, coverage.len())?;
+    if let Some(i) = coverage.iter().position(|c| !c.is_finite()) {
+        return Err(bad(path, format!("coverage of pixel {i} is not finite")));
+    }
+    let bytes: Vec<u8> = coverage
+        .iter()
+        .map(|&c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
     let mut out = Vec::new();
     image::ImageEncoder::write_image(
         image::codecs::png::PngEncoder::new(&mut out),

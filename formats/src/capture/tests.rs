@@ -88,12 +88,13 @@ fn manifest(format: ImageFormat) -> CaptureManifest {
     }
 }
 
-fn pixels(frame: usize, cam: usize) -> (Vec<Vec3>, Vec<bool>) {
+/// Colours and a coverage mask with every level k/17 (0 and 1 included).
+fn pixels(frame: usize, cam: usize) -> (Vec<Vec3>, Vec<f32>) {
     let rgb = (0..48)
         .map(|i| Vec3::new(i as f32 / 47.0, (frame as f32) * 0.25, cam as f32 * 0.5))
         .collect();
     let mask = (0..48)
-        .map(|i| (i + frame + cam).is_multiple_of(3))
+        .map(|i| ((i * 7 + frame * 3 + cam * 5) % 18) as f32 / 17.0)
         .collect();
     (rgb, mask)
 }
@@ -146,10 +147,16 @@ fn round_trip_write_then_load_gives_equal_data() {
         assert_eq!(c.initial_weights.as_ref(), Some(&skin));
         assert_eq!(c.evaluation_true_weights().unwrap(), Some(skin.clone()));
         assert_eq!(c.evaluation_gt_mesh(2).unwrap(), gt);
+        // Training frame 1 has no ground-truth file in this capture: a typed error naming it.
         assert!(
-            c.evaluation_gt_mesh(1).is_err(),
-            "training frames have no ground truth"
+            matches!(c.evaluation_gt_mesh(1), Err(CaptureError::Io { file, .. }) if file.ends_with("00001.bin")),
+            "a missing training-frame file"
         );
+        // A frame that is neither training nor test is refused by the manifest's rules.
+        assert!(matches!(
+            c.evaluation_gt_mesh(7),
+            Err(CaptureError::Invalid { .. })
+        ));
         assert_eq!(
             (c.train_frames.clone(), c.test_frames.clone()),
             (vec![0, 1], vec![2])
@@ -180,7 +187,14 @@ fn round_trip_write_then_load_gives_equal_data() {
                 for (a, b) in img.rgb.iter().zip(&rgb) {
                     assert!((*a - *b).abs().max_element() <= tol, "{a} vs {b}");
                 }
-                assert_eq!(c.load_mask(cam, f).unwrap().inside, mask);
+                let m = c.load_mask(cam, f).unwrap();
+                for (i, (&got, &want)) in m.coverage.iter().zip(&mask).enumerate() {
+                    assert!(
+                        (got - want).abs() <= 0.5 / 255.0 + 1e-6,
+                        "{i}: {got} vs {want}"
+                    );
+                    assert_eq!(m.inside[i], want > 0.5, "{i}: coverage {want}");
+                }
             }
         }
     }

@@ -212,12 +212,13 @@ impl CaptureWriter {
         }
     }
 
-    /// Writes the mask of camera `cam` at `frame`.
+    /// Writes the mask of camera `cam` at `frame` from per-pixel coverage in `[0, 1]` (0 and 1
+    /// for a binary mask).
     pub fn write_mask(
         &self,
         cam: usize,
         frame: usize,
-        inside: &[bool],
+        coverage: &[f32],
     ) -> Result<(), CaptureError> {
         let c = self
             .manifest
@@ -231,7 +232,7 @@ impl CaptureWriter {
             frame,
             super::ImageFormat::Png,
         );
-        images::write_mask_png(&path, c.width, c.height, inside)
+        images::write_mask_png(&path, c.width, c.height, coverage)
     }
 
     /// Writes `manifest.json` (pretty-printed) and returns its path.

@@ -5,7 +5,10 @@
 use core::arch::x86_64::*;
 
 use super::{LayerArgs, MR, TILE};
-use crate::activation::{Act, EXP_MAX, EXP_MIN, EXP_P, EXP_TAIL, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E};
+use crate::activation::{
+    Act, EXP_MAX, EXP_MIN, EXP_P, EXP_TAIL, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E,
+    SOFTPLUS_EXP_MIN,
+};
 
 /// Vectors per vertex block (16 vertices).
 const NV: usize = 2;
@@ -54,15 +57,24 @@ fn log1p_ps(y: __m256) -> __m256 {
     _mm256_mul_ps(_mm256_add_ps(s, s), q)
 }
 
+/// `exp(max(−β|x|, SOFTPLUS_EXP_MIN))`, Softplus's tail term.
+#[inline]
+#[target_feature(enable = "avx2,fma")]
+fn tail_exp(x: __m256, beta: __m256) -> __m256 {
+    exp_ps(_mm256_max_ps(
+        _mm256_sub_ps(
+            _mm256_setzero_ps(),
+            _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x)),
+        ),
+        _mm256_set1_ps(SOFTPLUS_EXP_MIN),
+    ))
+}
+
 #[inline]
 #[target_feature(enable = "avx2,fma")]
 fn softplus_ps(x: __m256, beta: __m256, inv_beta: __m256) -> __m256 {
-    let a = _mm256_mul_ps(beta, _mm256_andnot_ps(_mm256_set1_ps(-0.0), x));
-    let e = exp_ps(_mm256_sub_ps(_mm256_setzero_ps(), a));
-    // The tail beyond `EXP_TAIL` is exactly zero (a subnormal otherwise; see `activation`).
-    let keep = _mm256_cmp_ps::<_CMP_LE_OQ>(a, _mm256_set1_ps(EXP_TAIL));
-    let tail = _mm256_and_ps(keep, _mm256_mul_ps(log1p_ps(e), inv_beta));
-    _mm256_add_ps(tail, _mm256_max_ps(x, _mm256_setzero_ps()))
+    let e = tail_exp(x, beta);
+    _mm256_fmadd_ps(log1p_ps(e), inv_beta, _mm256_max_ps(x, _mm256_setzero_ps()))
 }
 
 /// # Safety
@@ -163,4 +175,31 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
             }
         }
     }
+}
+
+/// Softplus in place over `x` and its slope `sigmoid(β·x)` into `slope` (the trainer's forward
+/// pass keeps the slope for its backward pass), 8 lanes at a time; the tail goes through the
+/// scalar path.
+///
+/// # Safety
+/// The CPU must support avx2,fma, and `slope.len() == x.len()`.
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn softplus_with_slope(x: &mut [f32], slope: &mut [f32], beta: f32) {
+    let n = x.len() - x.len() % 8;
+    let (b, ib) = (_mm256_set1_ps(beta), _mm256_set1_ps(1.0 / beta));
+    let (xp, sp) = (x.as_mut_ptr(), slope.as_mut_ptr());
+    for i in (0..n).step_by(8) {
+        // SAFETY: `i + 8 ≤ n ≤ x.len() = slope.len()`.
+        unsafe {
+            let x = _mm256_loadu_ps(xp.add(i));
+            let e = tail_exp(x, b);
+            let h = _mm256_fmadd_ps(log1p_ps(e), ib, _mm256_max_ps(x, _mm256_setzero_ps()));
+            let inv = _mm256_div_ps(_mm256_set1_ps(1.0), _mm256_add_ps(e, _mm256_set1_ps(1.0)));
+            let ge = _mm256_cmp_ps::<_CMP_GE_OQ>(x, _mm256_setzero_ps());
+            let s = _mm256_blendv_ps(_mm256_mul_ps(e, inv), inv, ge);
+            _mm256_storeu_ps(xp.add(i), h);
+            _mm256_storeu_ps(sp.add(i), s);
+        }
+    }
+    super::scalar::softplus_with_slope(&mut x[n..], &mut slope[n..], beta);
 }

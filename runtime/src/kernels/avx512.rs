@@ -7,6 +7,7 @@ use core::arch::x86_64::*;
 use super::{LayerArgs, MR, TILE};
 use crate::activation::{
     Act, EXP_MAX, EXP_MIN, EXP_P, EXP_TAIL, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E,
+    SOFTPLUS_EXP_MIN,
 };
 
 const NV: usize = TILE / 16;
@@ -51,15 +52,21 @@ fn log1p_ps(y: __m512) -> __m512 {
     _mm512_mul_ps(_mm512_add_ps(s, s), q)
 }
 
+/// `exp(max(−β|x|, SOFTPLUS_EXP_MIN))`, Softplus's tail term.
+#[inline]
+#[target_feature(enable = "avx512f")]
+fn tail_exp(x: __m512, beta: __m512) -> __m512 {
+    exp_ps(_mm512_max_ps(
+        _mm512_sub_ps(_mm512_setzero_ps(), _mm512_mul_ps(beta, _mm512_abs_ps(x))),
+        _mm512_set1_ps(SOFTPLUS_EXP_MIN),
+    ))
+}
+
 #[inline]
 #[target_feature(enable = "avx512f")]
 fn softplus_ps(x: __m512, beta: __m512, inv_beta: __m512) -> __m512 {
-    let a = _mm512_mul_ps(beta, _mm512_abs_ps(x));
-    let e = exp_ps(_mm512_sub_ps(_mm512_setzero_ps(), a));
-    // The tail beyond `EXP_TAIL` is exactly zero (a subnormal otherwise; see `activation`).
-    let keep = _mm512_cmp_ps_mask::<_CMP_LE_OQ>(a, _mm512_set1_ps(EXP_TAIL));
-    let tail = _mm512_maskz_mul_ps(keep, log1p_ps(e), inv_beta);
-    _mm512_add_ps(tail, _mm512_max_ps(x, _mm512_setzero_ps()))
+    let e = tail_exp(x, beta);
+    _mm512_fmadd_ps(log1p_ps(e), inv_beta, _mm512_max_ps(x, _mm512_setzero_ps()))
 }
 
 /// # Safety
@@ -155,4 +162,31 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
             }
         }
     }
+}
+
+/// Softplus in place over `x` and its slope `sigmoid(β·x)` into `slope` (the trainer's forward
+/// pass keeps the slope for its backward pass), 16 lanes at a time; the tail goes through the
+/// scalar path.
+///
+/// # Safety
+/// The CPU must support avx512f, and `slope.len() == x.len()`.
+#[target_feature(enable = "avx512f")]
+pub(super) unsafe fn softplus_with_slope(x: &mut [f32], slope: &mut [f32], beta: f32) {
+    let n = x.len() - x.len() % 16;
+    let (b, ib) = (_mm512_set1_ps(beta), _mm512_set1_ps(1.0 / beta));
+    let (xp, sp) = (x.as_mut_ptr(), slope.as_mut_ptr());
+    for i in (0..n).step_by(16) {
+        // SAFETY: `i + 16 ≤ n ≤ x.len() = slope.len()`.
+        unsafe {
+            let x = _mm512_loadu_ps(xp.add(i));
+            let e = tail_exp(x, b);
+            let h = _mm512_fmadd_ps(log1p_ps(e), ib, _mm512_max_ps(x, _mm512_setzero_ps()));
+            let inv = _mm512_div_ps(_mm512_set1_ps(1.0), _mm512_add_ps(e, _mm512_set1_ps(1.0)));
+            let ge = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(x, _mm512_setzero_ps());
+            let s = _mm512_mask_blend_ps(ge, _mm512_mul_ps(e, inv), inv);
+            _mm512_storeu_ps(xp.add(i), h);
+            _mm512_storeu_ps(sp.add(i), s);
+        }
+    }
+    super::scalar::softplus_with_slope(&mut x[n..], &mut slope[n..], beta);
 }

@@ -10,6 +10,7 @@
 //!
 //! The kernel is chosen once ([`Kernel::detect`]) and stored in the model.
 
+use crate::RuntimeError;
 use crate::activation::Act;
 
 #[cfg(target_arch = "x86_64")]
@@ -168,6 +169,45 @@ pub(crate) fn softmax_tile(kernel: Kernel, buf: &mut [f32], rows: usize) {
         }
         _ => scalar::softmax_tile(buf, rows),
     }
+}
+
+/// Softplus with sharpness `beta` in place over `x`, and its slope `sigmoid(β·x)` written to
+/// `slope`: the activation of a training step's forward pass together with what its backward
+/// pass needs (`∂softplus/∂x`), with the same polynomials the runtime's layers use.
+///
+/// # Errors
+/// [`RuntimeError::BufferLength`] (field `slope`) when the slices differ in length, and
+/// [`RuntimeError::KernelUnavailable`] for a kernel this CPU or build cannot run.
+pub fn softplus_with_slope(
+    kernel: Kernel,
+    x: &mut [f32],
+    slope: &mut [f32],
+    beta: f32,
+) -> Result<(), RuntimeError> {
+    if slope.len() != x.len() {
+        return Err(RuntimeError::BufferLength {
+            field: "slope",
+            len: slope.len(),
+            expected: x.len(),
+        });
+    }
+    if !kernel.is_available() {
+        return Err(RuntimeError::KernelUnavailable(kernel));
+    }
+    match kernel {
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx512 if !cfg!(feature = "scalar") => {
+            // SAFETY: availability was checked just above, and the lengths are equal.
+            unsafe { avx512::softplus_with_slope(x, slope, beta) }
+        }
+        #[cfg(target_arch = "x86_64")]
+        Kernel::Avx2 if !cfg!(feature = "scalar") => {
+            // SAFETY: availability was checked just above, and the lengths are equal.
+            unsafe { avx2::softplus_with_slope(x, slope, beta) }
+        }
+        _ => scalar::softplus_with_slope(x, slope, beta),
+    }
+    Ok(())
 }
 
 /// Packs a `rows × k` matrix given by `get(row, col)` into `MR`-row panels (`out` holds

@@ -2,6 +2,7 @@
 //! the reference every SIMD kernel is tested against, and the path the `scalar` feature forces.
 
 use super::{LayerArgs, MR, TILE};
+use crate::activation::softplus_slope as slope_of;
 use crate::activation::{Act, EXP_TAIL, softplus};
 
 pub(super) fn layer(a: LayerArgs<'_>) {
@@ -60,5 +61,12 @@ pub(super) fn softmax_tile(buf: &mut [f32], rows: usize) {
         for j in 0..rows {
             buf[j * TILE + v] *= inv;
         }
+    }
+}
+
+pub(super) fn softplus_with_slope(x: &mut [f32], slope: &mut [f32], beta: f32) {
+    for (v, s) in x.iter_mut().zip(slope) {
+        *s = slope_of(*v, beta);
+        *v = softplus(*v, beta);
     }
 }

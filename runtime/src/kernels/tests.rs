@@ -163,8 +163,11 @@ fn simd_softplus_is_accurate_across_the_range() {
                 let bx = f64::from(beta) * f64::from(*x);
                 let want = (bx.max(0.0) + libm::log1p(libm::exp(-bx.abs()))) / f64::from(beta);
                 let err = (f64::from(*g) - want).abs();
+                // The tail below e^SOFTPLUS_EXP_MIN / β is clamped there (no subnormals).
+                let floor =
+                    libm::exp(f64::from(crate::activation::SOFTPLUS_EXP_MIN)) / f64::from(beta);
                 assert!(
-                    err <= 1e-6 * want.abs() + 1e-30,
+                    err <= 1e-6 * want.abs() + floor,
                     "{kern:?} β={beta} x={x}: {g} vs {want}"
                 );
             }
@@ -244,4 +247,56 @@ fn no_kernel_emits_subnormal_activations_or_weights() {
         );
         assert!(logits[39 * TILE] == 0.0 && logits[TILE] > 0.0);
     }
+}
+
+#[test]
+fn every_kernel_softplus_with_slope_agrees_with_the_f64_definition() {
+    // Lengths that leave a tail for every vector width; |βx| up to 40 covers both branches, the
+    // curved part and the far tail where the slope is ~e^-40.
+    let beta = 100.0f32;
+    for n in [0usize, 1, 7, 8, 15, 16, 17, 1000] {
+        let mut rng = ChaCha8Rng::seed_from_u64(n as u64);
+        let x0 = random(&mut rng, n, 0.4);
+        for kernel in Kernel::ALL.into_iter().filter(|k| k.is_available()) {
+            let mut x = x0.clone();
+            let mut slope = vec![f32::NAN; n];
+            softplus_with_slope(kernel, &mut x, &mut slope, beta).unwrap();
+            for i in 0..n {
+                let bx = f64::from(beta) * f64::from(x0[i]);
+                let want_h = (libm::log1p(libm::exp(-bx.abs())) + bx.max(0.0)) / f64::from(beta);
+                let want_s = 1.0 / (1.0 + libm::exp(-bx));
+                // exp amplifies the f32 rounding of βx (relative 6e-8) by |βx|.
+                let rel = 1e-6 + 1.2e-7 * bx.abs();
+                let tol_h = rel * want_h.abs() + 1e-12;
+                let tol_s = rel * want_s.abs() + 1e-30;
+                assert!(
+                    (f64::from(x[i]) - want_h).abs() <= tol_h,
+                    "{kernel:?} n={n} softplus({}) = {} vs {want_h}",
+                    x0[i],
+                    x[i]
+                );
+                assert!(
+                    (f64::from(slope[i]) - want_s).abs() <= tol_s,
+                    "{kernel:?} n={n} slope({}) = {} vs {want_s}",
+                    x0[i],
+                    slope[i]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn softplus_with_slope_rejects_mismatched_slices() {
+    let mut x = vec![0.0f32; 4];
+    let mut slope = vec![0.0f32; 3];
+    let e = softplus_with_slope(Kernel::Scalar, &mut x, &mut slope, 100.0).unwrap_err();
+    assert_eq!(
+        e,
+        RuntimeError::BufferLength {
+            field: "slope",
+            len: 3,
+            expected: 4
+        }
+    );
 }

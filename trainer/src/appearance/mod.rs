@@ -16,7 +16,7 @@
 
 use std::path::{Path, PathBuf};
 
-use candle_core::{DType, Device, Result, Tensor, Var};
+use candle_core::{DType, Device, Result, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use glam::Vec3;
 use skinfield_formats::Camera;
@@ -24,7 +24,9 @@ use skinfield_formats::mesh::area_weighted_normals;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 
 use crate::raster::rasterize;
-use crate::skinnet::{WnLinear, encode_positions, init_net_varmap, softplus};
+use crate::skinnet::{
+    SkfNetError, WnLinear, encode_positions, init_net_varmap, softplus, varmap_from_skf,
+};
 
 /// A weight-normalised MLP of the file's architecture for [`Net::Albedo`] or [`Net::Shadow`].
 #[derive(Clone, Debug)]
@@ -305,39 +307,15 @@ impl Appearance {
                     net: net.prefix(),
                 });
             }
-            let varmap = VarMap::new();
-            let mut data = varmap
-                .data()
-                .lock()
-                .map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
-            for (i, (out, inp)) in config.layer_shapes(net).enumerate() {
-                let bad = |reason: String| AppearanceError::Tensor {
+            varmap_from_skf(view, net).map_err(|e| match e {
+                SkfNetError::Tensor { layer, reason } => AppearanceError::Tensor {
                     path: path.to_owned(),
                     net: net.prefix(),
-                    layer: i,
+                    layer,
                     reason,
-                };
-                let (wv, bv) = view.layer(net, i).ok_or_else(|| bad("not stored".into()))?;
-                let mut w = vec![0.0; out * inp];
-                let mut b = vec![0.0; out];
-                wv.to_f32(&mut w).map_err(|e| bad(e.to_string()))?;
-                bv.to_f32(&mut b).map_err(|e| bad(e.to_string()))?;
-                let g: Vec<f32> = w
-                    .chunks(inp)
-                    .map(|r| r.iter().map(|x| x * x).sum::<f32>().sqrt())
-                    .collect();
-                let dev = Device::Cpu;
-                let name = |p: &str| format!("{}.l{i}.{p}", net.prefix());
-                for (n, t) in [
-                    (name("v"), Tensor::from_vec(w, (out, inp), &dev)?),
-                    (name("g"), Tensor::from_vec(g, out, &dev)?),
-                    (name("b"), Tensor::from_vec(b, out, &dev)?),
-                ] {
-                    data.insert(n, Var::from_tensor(&t)?);
-                }
-            }
-            drop(data);
-            Ok(varmap)
+                },
+                SkfNetError::Candle(e) => AppearanceError::from(e),
+            })
         };
         let albedo_vars = load(Net::Albedo)?;
         let shadow_vars = load(Net::Shadow)?;

@@ -190,13 +190,16 @@ pub fn run(
             let mut trainer = Trainer::new(data.clone(), config, false)?;
             trainer.resume(&stage1_dir.join("checkpoint.safetensors"))?;
             trainer.run(&dir, progress)?;
+            trainer.adopt_average()?;
             let appearance = if v.stages.any() {
                 Some(trainer.run_stages(images.clone(), &dir, progress)?)
             } else {
                 None
             };
+            trainer.adopt_average()?;
             let net = trainer.net().context("the trainer holds no network")?;
             let mut model = to_skf_model(net, &capture.skeleton)?;
+            model.candidates = trainer.export_candidates();
             if let Some(a) =
                 appearance.filter(|_| v.stages.colours != ColourSource::FixedVertexColours)
             {

@@ -123,6 +123,9 @@ pub fn train_skinnet(
     }
     let start = Instant::now();
     trainer.run(work, progress)?;
+    report_warm_start(&trainer);
+    // The average of stage 1's iterates is the model; stages 2–4 continue from it.
+    trainer.adopt_average()?;
     let stages = trainer.config().stages;
     let appearance = if stages.any() {
         let images = load_images(capture, options, stages.image_blur_px)?;
@@ -134,15 +137,47 @@ pub fn train_skinnet(
     } else {
         None
     };
+    // Stage 4's average, when it ran.
+    trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
     let net = trainer.net().context("the trainer holds no network")?;
     let mut model = to_skf_model(net, &skeleton)?;
+    model.candidates = trainer.export_candidates();
     // Fixed vertex colours leave the nets untrained: storing them would show noise in a viewer.
     if let Some(a) = appearance.filter(|_| stages.colours != ColourSource::FixedVertexColours) {
         a.push_to_skf(&mut model)?;
     }
     model.write(out)?;
     Ok(seconds)
+}
+
+/// Says how the warm start ended: converged, or stopped at its cap (a warning on stderr: the
+/// image losses then start from weights that differ from the initial ones).
+fn report_warm_start(trainer: &Trainer) {
+    let w = trainer.warm_status();
+    let c = trainer.config();
+    if w.iterations == 0 {
+        return;
+    }
+    if w.converged {
+        println!(
+            "warm start converged after {} iterations (KL {:.4}, position error {:.1e} of the \
+             template's diagonal)",
+            w.iterations, w.kl, w.position_relative
+        );
+    } else {
+        eprintln!(
+            "warning: the warm start stopped at its cap of {} iterations without converging: \
+             KL {:.4} (tolerance {}), position error {:.1e} of the template's diagonal \
+             (tolerance {:.1e}). SkinNet starts away from the initial weights; raise \
+             `warm_start_iterations` in the training configuration.",
+            w.iterations,
+            w.kl,
+            c.warm_start_kl_tolerance,
+            w.position_relative,
+            c.warm_start_position_tolerance
+        );
+    }
 }
 
 /// Trains the static baseline at full template resolution (it has one weight set per vertex, so
@@ -171,6 +206,7 @@ pub fn train_static(
     }
     let start = Instant::now();
     trainer.run(work, progress)?;
+    trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
     let dense = trainer
         .static_weights()?

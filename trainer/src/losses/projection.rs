@@ -45,6 +45,56 @@ pub fn project(camera: &Camera, points: &Tensor) -> Result<Tensor> {
     Tensor::cat(&[u, v], 1)?.reshape(out)
 }
 
+/// Pixel coordinates of a world point and the rows `∂u/∂p`, `∂v/∂p` of the projection's
+/// Jacobian (the same model as [`Camera::project`]: pinhole, then Brown–Conrady distortion);
+/// `None` when the point is not in front of the camera.
+#[must_use]
+pub fn project_with_jacobian(
+    camera: &Camera,
+    p: glam::Vec3,
+) -> Option<(glam::Vec2, [glam::Vec3; 2])> {
+    use glam::{Vec2, Vec3};
+    let c = camera.to_camera(p);
+    if c.z <= 1e-6 {
+        return None;
+    }
+    let inv_z = 1.0 / c.z;
+    let (x, y) = (c.x * inv_z, c.y * inv_z);
+    let r = camera.rotation;
+    // Rows of R: ∂(x_cam)/∂p.
+    let (r0, r1, r2) = (r.row(0), r.row(1), r.row(2));
+    let dx = (r0 - r2 * x) * inv_z;
+    let dy = (r1 - r2 * y) * inv_z;
+    let d = camera.distortion;
+    let (xd, yd, j) = if d.is_none() {
+        (x, y, [[1.0, 0.0], [0.0, 1.0]])
+    } else {
+        let rr = x * x + y * y;
+        let radial = 1.0 + rr * (d.k1 + rr * (d.k2 + rr * d.k3));
+        // ∂radial/∂(r²).
+        let dradial = d.k1 + rr * (2.0 * d.k2 + 3.0 * d.k3 * rr);
+        let xd = x * radial + 2.0 * d.p1 * x * y + d.p2 * (rr + 2.0 * x * x);
+        let yd = y * radial + d.p1 * (rr + 2.0 * y * y) + 2.0 * d.p2 * x * y;
+        let j = [
+            [
+                radial + 2.0 * x * x * dradial + 2.0 * d.p1 * y + 6.0 * d.p2 * x,
+                2.0 * x * y * dradial + 2.0 * d.p1 * x + 2.0 * d.p2 * y,
+            ],
+            [
+                2.0 * x * y * dradial + 2.0 * d.p1 * x + 2.0 * d.p2 * y,
+                radial + 2.0 * y * y * dradial + 6.0 * d.p1 * y + 2.0 * d.p2 * x,
+            ],
+        ];
+        (xd, yd, j)
+    };
+    let du: Vec3 = (dx * j[0][0] + dy * j[0][1]) * camera.fx;
+    let dv: Vec3 = (dx * j[1][0] + dy * j[1][1]) * camera.fy;
+    Some((
+        Vec2::new(camera.fx * xd + camera.cx, camera.fy * yd + camera.cy),
+        [du, dv],
+    ))
+}
+
 /// Whether each world point is in front of the camera (the same test as `Camera::project`).
 #[must_use]
 pub fn in_front(camera: &Camera, points: &[glam::Vec3]) -> Vec<bool> {
@@ -120,6 +170,35 @@ mod tests {
         assert!(
             in_front(&camera(false), &[Vec3::ZERO, Vec3::new(0.0, 0.0, 10.0)]) == vec![true, false]
         );
+    }
+
+    #[test]
+    fn jacobian_matches_camera_project_and_finite_differences() {
+        for distorted in [false, true] {
+            let c = camera(distorted);
+            for p in points() {
+                let (uv, j) = project_with_jacobian(&c, p).unwrap();
+                let e = c.project(p).unwrap();
+                assert!((uv - e).length() < 1e-4, "{uv} vs {e}");
+                // Central differences in f64 around the f32 point (step 1e-3 m).
+                let h = 1e-3f32;
+                for k in 0..3 {
+                    let mut a = p;
+                    let mut b = p;
+                    a[k] += h;
+                    b[k] -= h;
+                    let fd = (c.project(a).unwrap() - c.project(b).unwrap()) / (2.0 * h);
+                    for (row, fdk) in [(0, fd.x), (1, fd.y)] {
+                        let got = j[row][k];
+                        assert!(
+                            (got - fdk).abs() <= 2e-3 * fdk.abs().max(10.0),
+                            "distorted {distorted} row {row} axis {k}: {got} vs {fdk}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(project_with_jacobian(&camera(false), Vec3::new(0.0, 0.0, 10.0)).is_none());
     }
 
     #[test]

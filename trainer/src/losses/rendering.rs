@@ -23,8 +23,8 @@
 //!   it is what DESIGN.md prescribes and what the finite-difference tests check, with `b` and the
 //!   sample set held fixed.
 //!
-//! The bilinear sampler is [`sample_distance`] on one [`DistanceImage`] per colour channel: the
-//! same differentiable, edge-clamped sampler the silhouette loss uses, applied to colour values.
+//! The bilinear sampler is [`sample_bilinear`] on one [`BilinearImage`] per colour channel
+//! (differentiable, edge-clamped).
 
 use std::sync::Arc;
 
@@ -34,8 +34,7 @@ use rand::Rng;
 use skinfield_formats::Camera;
 
 use super::projection::project;
-use super::silhouette::sample_distance;
-use crate::distance_transform::DistanceImage;
+use crate::bilinear::{BilinearImage, sample_bilinear};
 use crate::raster::{Fragments, NO_TRIANGLE};
 
 mod blur;
@@ -44,7 +43,7 @@ pub use blur::blur_within_mask;
 /// A captured colour image as three bilinearly sampled channels.
 #[derive(Clone, Debug)]
 pub struct RgbTarget {
-    channels: [Arc<DistanceImage>; 3],
+    channels: [Arc<BilinearImage>; 3],
 }
 
 /// Why a colour image cannot be a rendering target.
@@ -77,7 +76,7 @@ impl RgbTarget {
             });
         }
         let channel = |k: usize| {
-            Arc::new(DistanceImage {
+            Arc::new(BilinearImage {
                 width,
                 height,
                 data: rgb.iter().map(|c| c[k]).collect(),
@@ -105,7 +104,7 @@ impl RgbTarget {
         let c = self
             .channels
             .iter()
-            .map(|ch| sample_distance(ch, uv))
+            .map(|ch| sample_bilinear(ch, uv))
             .collect::<Result<Vec<_>>>()?;
         Tensor::stack(&c, 1)
     }

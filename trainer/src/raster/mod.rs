@@ -118,6 +118,52 @@ pub fn rasterize(camera: &Camera, positions: &[Vec3], triangles: &[[u32; 3]]) ->
     rasterize_screen(camera.width, camera.height, &screen, triangles, true)
 }
 
+/// Fraction of each pixel that the mesh covers, from `samples × samples` sub-pixel samples per
+/// pixel (a regular grid at `(x + (i + ½)/s, y + (j + ½)/s)`): the anti-aliased mask a camera
+/// records, whose 50 % level places the outline to `1/samples` of a pixel. `samples = 1` is the
+/// binary mask of [`rasterize`].
+#[must_use]
+pub fn coverage(
+    camera: &Camera,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    samples: u32,
+) -> Vec<f32> {
+    let s = samples.max(1);
+    // Pixel u maps to s·u on the fine grid, whose pixel centres are the sub-pixel samples.
+    let screen: Vec<ScreenVertex> = project_vertices(camera, positions)
+        .into_iter()
+        .map(|v| ScreenVertex {
+            xy: v.xy * s as f32,
+            ..v
+        })
+        .collect();
+    let fine = rasterize_screen(
+        camera.width * s,
+        camera.height * s,
+        &screen,
+        triangles,
+        true,
+    );
+    let (w, h, s) = (camera.width as usize, camera.height as usize, s as usize);
+    let scale = 1.0 / (s * s) as f32;
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, c) in row.iter_mut().enumerate() {
+            let mut n = 0u32;
+            for j in 0..s {
+                let base = (y * s + j) * w * s + x * s;
+                n += fine.triangle[base..base + s]
+                    .iter()
+                    .filter(|&&t| t != NO_TRIANGLE)
+                    .count() as u32;
+            }
+            *c = n as f32 * scale;
+        }
+    });
+    out
+}
+
 /// Rasterises already projected vertices. With `perspective`, attributes are interpolated
 /// linearly in 1/depth (a pinhole projection); without, linearly in the image (orthographic).
 /// Triangles with an out-of-range index or an undrawable vertex are skipped.

@@ -11,23 +11,37 @@
 //! the two are broadcast-added to `[F·V, out]` — instead of multiplying an `[F·V, in]` input.
 
 pub mod export;
+pub mod fused;
 pub mod softplus;
+
+use std::sync::Arc;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use skinfield_formats::skf::{ModelConfig, Net};
+use skinfield_formats::skf::{ModelConfig, Net, SkfView};
 
 pub use softplus::{softmax_last, softplus, softplus_composite};
 
-/// Which Softplus implementation the forward pass uses.
+/// How the forward pass (and so the backward pass) is computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Activation {
-    /// The fused op ([`softplus::Softplus`]).
+pub enum Backend {
+    /// One custom op for the whole network ([`fused`]), f32 only: the training default.
     #[default]
     Fused,
+    /// candle's graph of tensor ops with the given Softplus: any dtype; the reference the
+    /// fused op is tested and benchmarked against.
+    Candle(Activation),
+}
+
+/// Which Softplus implementation the candle graph uses ([`Backend::Candle`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Activation {
+    /// The Softplus custom op with its own backward ([`softplus::Softplus`]).
+    #[default]
+    SoftplusOp,
     /// candle primitives (the reference for tests and the bench).
     Composite,
 }
@@ -62,6 +76,12 @@ impl WnLinear {
     pub fn bias(&self) -> &Tensor {
         &self.b
     }
+
+    /// The parameters `(v, g, b)`.
+    #[must_use]
+    pub fn parts(&self) -> (&Tensor, &Tensor, &Tensor) {
+        (&self.v, &self.g, &self.b)
+    }
 }
 
 /// SkinNet: weight-normalised MLP with a skip connection, Softplus, softmax over joints.
@@ -69,7 +89,9 @@ impl WnLinear {
 pub struct SkinNet {
     config: ModelConfig,
     layers: Vec<WnLinear>,
-    activation: Activation,
+    backend: Backend,
+    /// The fused op's architecture, SIMD kernel and buffer pool (shared by clones).
+    fused: Arc<fused::FusedContext>,
 }
 
 /// Parameter-name prefix of SkinNet inside a [`VarMap`] (matches [`Net::prefix`]).
@@ -90,7 +112,8 @@ impl SkinNet {
         Ok(Self {
             config,
             layers,
-            activation: Activation::Fused,
+            backend: Backend::default(),
+            fused: Arc::new(fused::FusedContext::new(config)),
         })
     }
 
@@ -117,11 +140,17 @@ impl SkinNet {
         Ok((Self::new(&vb.pp(PREFIX), config)?, varmap))
     }
 
-    /// Chooses the Softplus implementation.
+    /// Chooses how the forward and backward passes are computed.
     #[must_use]
-    pub fn with_activation(mut self, activation: Activation) -> Self {
-        self.activation = activation;
+    pub fn with_backend(mut self, backend: Backend) -> Self {
+        self.backend = backend;
         self
+    }
+
+    /// How the forward and backward passes are computed.
+    #[must_use]
+    pub fn backend(&self) -> Backend {
+        self.backend
     }
 
     /// The configuration.
@@ -136,16 +165,33 @@ impl SkinNet {
         &self.layers
     }
 
-    fn act(&self, x: &Tensor) -> Result<Tensor> {
-        match self.activation {
-            Activation::Fused => softplus(x, self.config.softplus_beta),
-            Activation::Composite => softplus_composite(x, self.config.softplus_beta),
+    /// Every layer's `v`, `g`, `b` flattened and concatenated in [`fused::ParamLayout`] order
+    /// (differentiable: the concatenation's backward hands each variable its slice).
+    pub fn packed_parameters(&self) -> Result<Tensor> {
+        let mut parts = Vec::with_capacity(3 * self.layers.len());
+        for l in &self.layers {
+            parts.push(l.v.flatten_all()?);
+            parts.push(l.g.clone());
+            parts.push(l.b.clone());
         }
+        Tensor::cat(&parts, 0)
     }
 
     /// Skinning weights `[F, V, J]` for encoded positions `[V, 3 + 6L]` ([`encode_positions`])
-    /// and pose features `[F, 3J]`; rows sum to one.
+    /// and pose features `[F, 3J]`; rows sum to one. With [`Backend::Fused`] and f32 inputs the
+    /// fused op computes it (other dtypes fall back to the candle graph).
     pub fn forward(&self, positions: &Tensor, poses: &Tensor) -> Result<Tensor> {
+        self.forward_masked(positions, poses, None)
+    }
+
+    /// [`SkinNet::forward`] with the softmax restricted to candidate joints: `mask` is `[V, J]`,
+    /// 0 where joint `j` is a candidate of vertex `v` and −∞ elsewhere ([`crate::candidates`]).
+    pub fn forward_masked(
+        &self,
+        positions: &Tensor,
+        poses: &Tensor,
+        mask: Option<&Tensor>,
+    ) -> Result<Tensor> {
         let (v, p) = positions.dims2()?;
         let (f, q) = poses.dims2()?;
         if p != self.config.position_width() || q != self.config.pose_width() {
@@ -155,6 +201,24 @@ impl SkinNet {
                 self.config.pose_width()
             );
         }
+        let activation = match self.backend {
+            Backend::Fused if positions.dtype() == DType::F32 && poses.dtype() == DType::F32 => {
+                return fused::forward(
+                    &self.fused,
+                    &self.packed_parameters()?,
+                    positions,
+                    poses,
+                    mask,
+                );
+            }
+            Backend::Fused => Activation::SoftplusOp,
+            Backend::Candle(a) => a,
+        };
+        let beta = self.config.softplus_beta;
+        let act = |x: &Tensor| match activation {
+            Activation::SoftplusOp => softplus(x, beta),
+            Activation::Composite => softplus_composite(x, beta),
+        };
         let n = self.layers.len() - 1;
         let skip = self.config.skip_layer as usize;
         // Position part [V, out] + (pose part + bias) [F, out], broadcast to [F·V, out].
@@ -179,10 +243,16 @@ impl SkinNet {
                 }
                 Some(h) => h.matmul(&w.t()?)?.broadcast_add(&layer.b)?,
             };
-            h = Some(if i < n { self.act(&z)? } else { z });
+            h = Some(if i < n { act(&z)? } else { z });
         }
         let logits = h.ok_or_else(|| candle_core::Error::Msg("SkinNet has no layers".into()))?;
-        softmax_last(&logits)?.reshape((f, v, self.config.joint_count as usize))
+        let j = self.config.joint_count as usize;
+        let logits = logits.reshape((f, v, j))?;
+        let logits = match mask {
+            Some(m) => logits.broadcast_add(&m.to_dtype(logits.dtype())?.unsqueeze(0)?)?,
+            None => logits,
+        };
+        softmax_last(&logits)?.reshape((f, v, j))
     }
 }
 
@@ -203,6 +273,68 @@ impl SkinNet {
             &Tensor::from_vec(flat, (poses.len(), q), &dev)?.to_dtype(dt)?,
         )?;
         w.to_dtype(DType::F32)?.flatten_all()?.to_vec1()
+    }
+}
+
+/// Why a net could not be read from a `.skf`.
+#[derive(Debug, thiserror::Error)]
+pub enum SkfNetError {
+    /// A layer's tensor is missing or unreadable.
+    #[error("layer {layer}: {reason}")]
+    Tensor {
+        /// Layer index.
+        layer: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// Building the variables failed.
+    #[error("candle: {0}")]
+    Candle(#[from] candle_core::Error),
+}
+
+/// The variables `{prefix}.l{i}.{v,g,b}` of `net` as stored in a parsed `.skf`: the file's plain
+/// weights become `v` with `g = ‖v‖_row`, so the effective weights are the file's (weight
+/// normalisation was folded at export) and training can continue from them.
+pub fn varmap_from_skf(view: &SkfView, net: Net) -> std::result::Result<VarMap, SkfNetError> {
+    let varmap = VarMap::new();
+    let mut data = varmap
+        .data()
+        .lock()
+        .map_err(|_| candle_core::Error::Msg("VarMap lock poisoned".into()))?;
+    for (i, (out, inp)) in view.config().layer_shapes(net).enumerate() {
+        let bad = |reason: String| SkfNetError::Tensor { layer: i, reason };
+        let (wv, bv) = view.layer(net, i).ok_or_else(|| bad("not stored".into()))?;
+        let mut w = vec![0.0; out * inp];
+        let mut b = vec![0.0; out];
+        wv.to_f32(&mut w).map_err(|e| bad(e.to_string()))?;
+        bv.to_f32(&mut b).map_err(|e| bad(e.to_string()))?;
+        let g: Vec<f32> = w
+            .chunks(inp)
+            .map(|r| r.iter().map(|x| x * x).sum::<f32>().sqrt())
+            .collect();
+        let dev = Device::Cpu;
+        let name = |p: &str| format!("{}.l{i}.{p}", net.prefix());
+        for (n, t) in [
+            (name("v"), Tensor::from_vec(w, (out, inp), &dev)?),
+            (name("g"), Tensor::from_vec(g, out, &dev)?),
+            (name("b"), Tensor::from_vec(b, out, &dev)?),
+        ] {
+            data.insert(n, Var::from_tensor(&t)?);
+        }
+    }
+    drop(data);
+    Ok(varmap)
+}
+
+impl SkinNet {
+    /// SkinNet as stored in a parsed `.skf` ([`varmap_from_skf`]), with the variables holding
+    /// its parameters (f32, CPU).
+    pub fn from_skf(view: &SkfView) -> std::result::Result<(Self, VarMap), SkfNetError> {
+        let varmap = varmap_from_skf(view, Net::Skin)?;
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
+        let mut config = *view.config();
+        config.nets = Net::Skin.bit();
+        Ok((Self::new(&vb.pp(Net::Skin.prefix()), config)?, varmap))
     }
 }
 

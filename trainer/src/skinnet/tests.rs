@@ -149,7 +149,7 @@ fn composite_activation_gives_the_same_output() {
     let a = net.forward(&enc, &poses).unwrap();
     let b = net
         .clone()
-        .with_activation(Activation::Composite)
+        .with_backend(Backend::Candle(Activation::Composite))
         .forward(&enc, &poses)
         .unwrap();
     let d = (a - b)

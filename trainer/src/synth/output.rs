@@ -17,7 +17,7 @@ use super::deform::GroundTruthDeformer;
 use super::motion::{CLIPS, Split, library};
 use super::rig::camera_rig;
 use super::{SynthConfig, SynthError, build_character};
-use crate::raster::{Light, ShadowMap, rasterize, shade};
+use crate::raster::{Light, ShadowMap, coverage, rasterize, shade};
 
 /// Frames per second recorded in the motion file.
 pub const FPS: f32 = 30.0;
@@ -45,7 +45,13 @@ pub struct SynthSummary {
     pub total_seconds: f64,
 }
 
-/// Renders one view of a posed mesh: shaded linear RGB and the mask.
+/// Sub-pixel samples per axis of a capture's masks: 4 × 4 gives coverage in steps of 1/16, which
+/// places the outline to about 0.06 px (the silhouette loss works at sub-pixel scale, see
+/// `losses::silhouette`).
+pub const MASK_SAMPLES: u32 = 4;
+
+/// Renders one view of a posed mesh: shaded linear RGB (one sample per pixel) and the mask's
+/// coverage ([`MASK_SAMPLES`]² samples per pixel).
 #[allow(clippy::too_many_arguments)]
 #[must_use]
 pub fn render_view(
@@ -55,7 +61,7 @@ pub fn render_view(
     normals: &[Vec3],
     light: &Light,
     shadow: &ShadowMap,
-) -> (Vec<Vec3>, Vec<bool>) {
+) -> (Vec<Vec3>, Vec<f32>) {
     let frags = rasterize(camera, positions, &template.triangles);
     let rgb = shade(
         camera,
@@ -68,7 +74,10 @@ pub fn render_view(
         Some(shadow),
         BACKGROUND,
     );
-    (rgb, frags.mask())
+    (
+        rgb,
+        coverage(camera, positions, &template.triangles, MASK_SAMPLES),
+    )
 }
 
 /// What gets filmed: a template, its skeleton, its ground-truth deformer and the motion.
@@ -203,7 +212,7 @@ pub fn write_subject(
     writer.write_true_weights(subject.deformer.skin())?;
 
     subject.frames.par_iter().enumerate().try_for_each(
-        |(f, (_, split, pose))| -> Result<(), SynthError> {
+        |(f, (_, _, pose))| -> Result<(), SynthError> {
             let (positions, normals) = subject.deformer.deform(pose)?;
             let shadow = ShadowMap::build(
                 light.direction,
@@ -223,9 +232,8 @@ pub fn write_subject(
                 writer.write_image(c, f, &rgb)?;
                 writer.write_mask(c, f, &mask)?;
             }
-            if *split == Split::Test {
-                writer.write_gt_mesh(f, &positions)?;
-            }
+            // Every frame's ground truth (evaluation only: the bounds fit the training frames').
+            writer.write_gt_mesh(f, &positions)?;
             Ok(())
         },
     )?;

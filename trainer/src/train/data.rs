@@ -11,6 +11,7 @@
 //! Only training frames are read; the capture's evaluation-only ground truth is never touched.
 
 use glam::Mat4;
+use rayon::prelude::*;
 use skinfield_formats::capture::{Capture, CaptureError};
 use skinfield_formats::{StaticSkin, Template, pose_features};
 use skinfield_runtime::resample::{Target, simplify};
@@ -130,22 +131,27 @@ pub fn train_data(
         let mut features = vec![0.0; 3 * j];
         pose_features(&skeleton, pose, capture.up_axis, &mut features)
             .map_err(|e| DataError::Inconsistent(format!("motion frame {f}: {e}")))?;
-        let mut views = Vec::with_capacity(cameras);
-        for (c, camera) in capture.rig.cameras.iter().take(cameras).enumerate() {
-            let mask = capture.load_mask(c, f)?;
-            let target = SilhouetteTarget::from_mask(
-                mask.width as usize,
-                mask.height as usize,
-                &mask.inside,
-            )
-            .map_err(|e| {
-                DataError::Inconsistent(format!("{}: {e}", capture.mask_path(c, f).display()))
-            })?;
-            views.push(View {
-                camera: camera.clone(),
-                target,
-            });
-        }
+        // Each view's outline is traced from its mask's coverage (sub-pixel; binary masks work
+        // too), in parallel.
+        let views = capture.rig.cameras[..cameras]
+            .par_iter()
+            .enumerate()
+            .map(|(c, camera)| -> Result<View, DataError> {
+                let mask = capture.load_mask(c, f)?;
+                let target = SilhouetteTarget::from_coverage(
+                    mask.width as usize,
+                    mask.height as usize,
+                    &mask.coverage,
+                )
+                .map_err(|e| {
+                    DataError::Inconsistent(format!("{}: {e}", capture.mask_path(c, f).display()))
+                })?;
+                Ok(View {
+                    camera: camera.clone(),
+                    target,
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         frames.push(Frame {
             skinning,
             pose_features: features,

@@ -17,15 +17,18 @@
 //! generator seeded by `(seed, iteration)`, so a
 //! resumed run draws the same batches as an uninterrupted one.
 
+pub mod average;
 pub mod config;
 pub mod data;
 pub mod plot;
+pub mod profile;
 pub mod queries;
 pub mod stages;
 
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
@@ -39,12 +42,12 @@ use crate::geodesic::MeshGraph;
 use crate::losses::laplacian::UniformLaplacian;
 use crate::losses::lbs::{lbs, rest_homogeneous, skinning_tensor};
 use crate::losses::partwise::PartwiseReg;
-use crate::losses::projection::{in_front, project};
-use crate::losses::silhouette::{SilhouetteTarget, silhouette_terms};
+use crate::losses::silhouette::{BatchView, EdgeTable, SilhouetteLoss, SilhouetteTarget};
 use crate::losses::skinning_reg::GeodesicSkinningReg;
 use crate::optim::Adam;
 use crate::skinnet::{PREFIX, SkinNet, encode_positions, softmax_last};
 pub use config::{ConfigError, LaplacianReference, LossWeights, TrainConfig};
+use profile::{IterationKind, Phase, StepProfile, Timer};
 
 /// One camera view of a training frame.
 #[derive(Clone, Debug)]
@@ -156,9 +159,24 @@ pub struct WarmRecord {
     pub iteration: u64,
     /// `KL(w_init ‖ w)` per vertex.
     pub kl: f64,
-    /// Mean squared distance (cm²) between the vertices skinned with SkinNet's and with the
-    /// initial weights.
+    /// Mean squared distance (cm², for metre-scaled templates) between the vertices skinned
+    /// with SkinNet's and with the initial weights.
     pub position_cm2: f64,
+    /// The root mean square of that distance over the template's bounding-box diagonal.
+    pub position_relative: f64,
+}
+
+/// Where the warm start stands.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WarmStatus {
+    /// Iterations run.
+    pub iterations: u64,
+    /// Whether the convergence test passed (then no more iterations run).
+    pub converged: bool,
+    /// `KL(w_init ‖ w)` per vertex, averaged over the last window.
+    pub kl: f64,
+    /// Relative root-mean-square position error, averaged over the last window.
+    pub position_relative: f64,
 }
 
 /// What is being optimised.
@@ -196,6 +214,102 @@ pub struct Trainer {
     /// `Σ_ij w_init ln w_init / V`, the constant that turns the warm start's cross-entropy into
     /// a KL divergence.
     init_entropy: f64,
+    /// Time per phase of the iterations run so far.
+    profile: StepProfile,
+    /// The training template's edges (silhouette edges are found among them every view).
+    edges: Arc<EdgeTable>,
+    /// The training template's triangles, shared with the silhouette op.
+    triangles: Arc<[[u32; 3]]>,
+    /// With [`TrainConfig::consistent_queries`]: the full-resolution rest positions `[N, 4]`.
+    query_rest: Option<Tensor>,
+    /// The candidate joints and the masks they make ([`crate::candidates`]).
+    candidates: Option<Candidates>,
+    /// The running average of the parameters over the image iterations.
+    average: Option<average::ParameterAverage>,
+    /// The last `warm_start_window` warm-start `(KL, relative position error)` pairs.
+    warm_window: std::collections::VecDeque<(f64, f64)>,
+    /// Whether the warm start has converged.
+    warm_converged: bool,
+    /// The template's bounding-box diagonal (the warm start's position scale).
+    diagonal: f64,
+}
+
+/// The candidate joints of a run and the masks they make.
+struct Candidates {
+    /// Per training vertex, its candidate joints (ascending).
+    lists: Vec<Vec<u16>>,
+    /// Additive mask `[V, J]` of the training vertices (0 or −∞).
+    mask: Tensor,
+    /// Additive mask `[N, J]` of the full-resolution query points (their nearest training
+    /// vertex's list, the runtime's rule), or a copy of `mask` without query cells.
+    query_mask: Tensor,
+}
+
+impl Candidates {
+    /// The candidates of `data`'s training vertices ([`crate::candidates::candidate_sets`] with
+    /// `k` joints; `None` when `k` is 0), and the initial weights of `data` — the warm start's
+    /// target and the regularisers' reference — restricted to them and renormalised, since
+    /// weights outside the candidates cannot be represented.
+    fn new(data: &mut TrainData, k: usize) -> Option<Self> {
+        if k == 0 {
+            return None;
+        }
+        let j = data.skeleton.len();
+        let lists = crate::candidates::candidate_sets(&data.init_weights, &data.skeleton, k);
+        restrict(&mut data.init_weights, j, &lists, |i| i);
+        let mask_values = crate::candidates::additive_mask(&lists, j);
+        let v = lists.len();
+        let mask = Tensor::from_vec(mask_values.clone(), (v, j), &Device::Cpu).ok()?;
+        let query_mask = match &mut data.queries {
+            Some(q) => {
+                let anchor = skinfield_runtime::candidates::nearest_anchors(
+                    &data.template.positions,
+                    &q.positions,
+                );
+                restrict(&mut q.init_weights, j, &lists, |i| anchor[i] as usize);
+                let rows: Vec<f32> = anchor
+                    .iter()
+                    .flat_map(|&a| {
+                        mask_values[a as usize * j..(a as usize + 1) * j]
+                            .iter()
+                            .copied()
+                    })
+                    .collect();
+                Tensor::from_vec(rows, (anchor.len(), j), &Device::Cpu).ok()?
+            }
+            None => mask.clone(),
+        };
+        Some(Self {
+            lists,
+            mask,
+            query_mask,
+        })
+    }
+}
+
+/// Zeroes each row's weights outside `lists[list_of(row)]` and renormalises the row (a row
+/// left with no weight gets its candidates' uniform blend).
+fn restrict(weights: &mut [f32], j: usize, lists: &[Vec<u16>], list_of: impl Fn(usize) -> usize) {
+    for (i, row) in weights.chunks_mut(j.max(1)).enumerate() {
+        let list = &lists[list_of(i)];
+        let mut keep = vec![false; j];
+        for &c in list {
+            keep[c as usize] = true;
+        }
+        for (w, k) in row.iter_mut().zip(&keep) {
+            if !k {
+                *w = 0.0;
+            }
+        }
+        let sum: f32 = row.iter().sum();
+        if sum > 0.0 {
+            row.iter_mut().for_each(|w| *w /= sum);
+        } else {
+            for &c in list {
+                row[c as usize] = 1.0 / list.len() as f32;
+            }
+        }
+    }
 }
 
 /// Frame-sampling stream of the warm start (its batches have `warm_start_batch` frames).
@@ -227,7 +341,7 @@ impl Trainer {
     /// penalty, rigid mask) and initialises the model from `config.seed`. `static_weights`
     /// selects the baseline, whose logits start at `ln(w_init + config.static_epsilon)`.
     pub fn new(
-        data: TrainData,
+        mut data: TrainData,
         config: TrainConfig,
         static_weights: bool,
     ) -> Result<Self, TrainError> {
@@ -254,11 +368,28 @@ impl Trainer {
                 )));
             }
         }
+        if let Some(q) = &data.queries
+            && (q.training_vertex_count() != v || q.init_weights.len() != q.positions.len() * j)
+        {
+            return Err(TrainError::Data(format!(
+                "queries: {} cells and {} initial weights for {v} training vertices and {} \
+                 query points × {j} joints",
+                q.training_vertex_count(),
+                q.init_weights.len(),
+                q.positions.len()
+            )));
+        }
+        let candidates = Candidates::new(&mut data, config.candidate_joints);
+        let t = &data.template;
         let dev = Device::Cpu;
         let bounds = t
             .bounds()
             .ok_or_else(|| TrainError::Data("template has no bounds".into()))?;
-        let (lo, hi) = (bounds.min, bounds.max);
+        let (mut lo, mut hi) = (bounds.min, bounds.max);
+        if config.cubic_normalisation {
+            let (centre, half) = ((lo + hi) * 0.5, (hi - lo).max_element() * 0.5);
+            (lo, hi) = (centre - half, centre + half);
+        }
         // A margin so points slightly outside the template (other resolutions) stay in [−1, 1].
         let pad = (hi - lo).max_element() * 0.05;
         let mc = ModelConfig {
@@ -313,26 +444,25 @@ impl Trainer {
             &dev,
         )?;
         let laplacian = UniformLaplacian::new(&t.positions, &t.triangles, &dev)?;
+        let edges = Arc::new(EdgeTable::new(v, &t.triangles));
+        let triangles: Arc<[[u32; 3]]> = t.triangles.clone().into();
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
         let init_entropy = mean_neg_entropy(&data.init_weights, v);
         let query_init = match &data.queries {
             Some(q) if !static_weights => {
-                if q.training_vertex_count() != v || q.init_weights.len() != q.positions.len() * j {
-                    return Err(TrainError::Data(format!(
-                        "queries: {} cells and {} initial weights for {v} training vertices and \
-                         {} query points × {j} joints",
-                        q.training_vertex_count(),
-                        q.init_weights.len(),
-                        q.positions.len()
-                    )));
-                }
                 let n = q.positions.len();
                 Some(Tensor::from_vec(q.init_weights.clone(), (n, j), &dev)?)
             }
             _ => None,
         };
-        let optimiser = Adam::from_varmap(&varmap, config.adam)?;
+        let optimiser = Adam::from_varmap(&varmap, Self::adam_config(&config, static_weights))?;
+        let query_rest = match &data.queries {
+            Some(q) if config.consistent_queries && !static_weights => {
+                Some(rest_homogeneous(&q.positions, &dev)?)
+            }
+            _ => None,
+        };
         Ok(Self {
             config,
             data,
@@ -349,7 +479,114 @@ impl Trainer {
             init,
             query_init,
             init_entropy,
+            profile: StepProfile::default(),
+            edges,
+            triangles,
+            query_rest,
+            candidates,
+            average: None,
+            warm_window: std::collections::VecDeque::new(),
+            warm_converged: false,
+            diagonal: f64::from((bounds.max - bounds.min).length()).max(1e-9),
         })
+    }
+
+    /// Where the warm start stands (averages over its last window of iterations).
+    #[must_use]
+    pub fn warm_status(&self) -> WarmStatus {
+        let n = self.warm_window.len().max(1) as f64;
+        WarmStatus {
+            iterations: self.warm_done,
+            converged: self.warm_converged,
+            kl: self.warm_window.iter().map(|w| w.0).sum::<f64>() / n,
+            position_relative: self.warm_window.iter().map(|w| w.1).sum::<f64>() / n,
+        }
+    }
+
+    /// Whether the warm start still has iterations to run.
+    fn warm_pending(&self) -> bool {
+        !self.is_static()
+            && !self.warm_converged
+            && self.warm_done < self.config.warm_start_iterations
+    }
+
+    /// Records one warm-start iteration in the convergence window and applies the test.
+    fn note_warm(&mut self, r: &WarmRecord) {
+        self.warm_window.push_back((r.kl, r.position_relative));
+        while self.warm_window.len() as u64 > self.config.warm_start_window {
+            self.warm_window.pop_front();
+        }
+        let s = self.warm_status();
+        self.warm_converged = self.warm_window.len() as u64 == self.config.warm_start_window
+            && s.kl <= self.config.warm_start_kl_tolerance
+            && s.position_relative <= self.config.warm_start_position_tolerance;
+    }
+
+    /// Adam's settings: the configured ones, with [`TrainConfig::static_lr`] for the static
+    /// baseline's logits.
+    fn adam_config(config: &TrainConfig, static_weights: bool) -> crate::optim::AdamConfig {
+        let mut adam = config.adam;
+        if static_weights {
+            adam.lr = config.static_lr;
+        }
+        adam
+    }
+
+    /// The learning rate of image iteration `done` (0-based). Stage 1: a linear ramp over
+    /// `lr_warmup` iterations, then a half cosine from the full rate down to `lr_final_fraction`
+    /// of it at its last iteration. Stage 4 (iterations past stage 1's) follows the same
+    /// cosine over its own iterations, without the ramp.
+    fn image_lr(&self, done: u64) -> f64 {
+        let base = Self::adam_config(&self.config, self.is_static()).lr;
+        let (ramp, start, len) = if done < self.config.iterations {
+            (self.config.lr_warmup, 0, self.config.iterations)
+        } else {
+            (
+                0,
+                self.config.iterations,
+                self.config.stages.refine_iterations,
+            )
+        };
+        let k = done - start;
+        let warm = if ramp == 0 {
+            1.0
+        } else {
+            ((k + 1) as f64 / ramp as f64).min(1.0)
+        };
+        let span = len.saturating_sub(ramp).max(1) as f64;
+        let t = (k.saturating_sub(ramp) as f64 / span).min(1.0);
+        let f = self.config.lr_final_fraction;
+        let cosine = f + (1.0 - f) * 0.5 * (1.0 + (core::f64::consts::PI * t).cos());
+        base * warm * cosine
+    }
+
+    fn is_static(&self) -> bool {
+        matches!(self.model, Model::Static { .. })
+    }
+
+    /// Replaces the parameters by their running average over the image iterations so far
+    /// ([`TrainConfig::ema_half_life`]) and drops the average: what is exported, and where the
+    /// later stages continue from (stage 4 starts an average of its own). A no-op without one.
+    pub fn adopt_average(&mut self) -> Result<(), TrainError> {
+        if let Some(mut a) = self.average.take() {
+            a.swap()?;
+        }
+        Ok(())
+    }
+
+    /// The homogeneous rest positions `[V, 4]` the batch is skinned from: the query rows' own
+    /// positions with [`TrainConfig::consistent_queries`], else the training vertices'.
+    fn rest_at(&self, query: Option<&Tensor>) -> Result<Tensor, TrainError> {
+        match (&self.query_rest, query) {
+            (Some(rest), Some(q)) => Ok(rest.index_select(q, 0)?),
+            _ => Ok(self.rest.clone()),
+        }
+    }
+
+    /// Where the iterations run so far spent their time ([`profile`]).
+    #[must_use]
+    pub fn profile(&self) -> &StepProfile {
+        &self.profile
     }
 
     /// The network (`None` for the static baseline).
@@ -364,11 +601,28 @@ impl Trainer {
     /// The static baseline's weights `[V, J]` (`None` for SkinNet).
     pub fn static_weights(&self) -> Result<Option<Vec<f32>>, TrainError> {
         match &self.model {
-            Model::Static { logits } => Ok(Some(
-                softmax_last(logits.as_tensor())?.flatten_all()?.to_vec1()?,
-            )),
+            Model::Static { .. } => Ok(Some(self.weights(&[0])?.flatten_all()?.to_vec1()?)),
             Model::Net { .. } => Ok(None),
         }
+    }
+
+    /// The anchors and candidate joints to store in the exported `.skf` (the training template's
+    /// vertices and their lists), or `None` when candidates are off.
+    #[must_use]
+    pub fn export_candidates(&self) -> Option<skinfield_formats::skf::Candidates> {
+        self.candidates
+            .as_ref()
+            .map(|c| skinfield_formats::skf::Candidates {
+                positions: self
+                    .data
+                    .template
+                    .positions
+                    .iter()
+                    .map(|p| p.to_array())
+                    .collect(),
+                lists: c.lists.clone(),
+                k: self.config.candidate_joints,
+            })
     }
 
     /// The configuration.
@@ -402,17 +656,31 @@ impl Trainer {
                     .iter()
                     .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
                     .collect();
-                let rows = match (query, query_encoded) {
-                    (Some(q), Some(points)) => points.index_select(q, 0)?,
-                    _ => encoded.clone(),
+                let (rows, mask) = match (query, query_encoded) {
+                    (Some(q), Some(points)) => (
+                        points.index_select(q, 0)?,
+                        self.candidates
+                            .as_ref()
+                            .map(|c| c.query_mask.index_select(q, 0))
+                            .transpose()?,
+                    ),
+                    _ => (
+                        encoded.clone(),
+                        self.candidates.as_ref().map(|c| c.mask.clone()),
+                    ),
                 };
-                net.forward(
+                net.forward_masked(
                     &rows,
                     &Tensor::from_vec(poses, (frames.len(), 3 * j), &Device::Cpu)?,
+                    mask.as_ref(),
                 )?
             }
             Model::Static { logits } => {
-                let w = softmax_last(logits.as_tensor())?;
+                let logits = match &self.candidates {
+                    Some(c) => logits.as_tensor().broadcast_add(&c.mask)?,
+                    None => logits.as_tensor().clone(),
+                };
+                let w = softmax_last(&logits)?;
                 let (v, _) = w.dims2()?;
                 w.unsqueeze(0)?
                     .broadcast_as((frames.len(), v, j))?
@@ -460,11 +728,12 @@ impl Trainer {
         &self,
         init: &Tensor,
         skinning: &Tensor,
+        rest: &Tensor,
         b: usize,
     ) -> Result<Tensor, TrainError> {
         let (v, j) = (self.data.template.vertex_count(), self.data.skeleton.len());
         let init = init.broadcast_as((b, v, j))?.contiguous()?;
-        Ok(lbs(&init, skinning, &self.rest)?)
+        Ok(lbs(&init, skinning, rest)?)
     }
 
     fn sample(&self, phase: u64, iteration: u64) -> Vec<usize> {
@@ -499,9 +768,12 @@ impl Trainer {
             self.warm_done += 1;
             return Ok(WarmRecord::default());
         }
+        const KIND: IterationKind = IterationKind::Warm;
+        let mut timer = Timer::start();
         let frames = self.sample(PHASE_WARM, self.warm_done);
         let query = self.draw_queries(PHASE_WARM, self.warm_done)?;
         let w = self.weights_at(&frames, query.as_ref())?;
+        timer.lap(&mut self.profile, KIND, Phase::Forward);
         let init = self.init_at(query.as_ref())?;
         let v = self.data.template.vertex_count();
         let b = frames.len();
@@ -516,21 +788,33 @@ impl Trainer {
         } else {
             self.init_entropy
         };
+        timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         let skinning = self.frame_skinning(&frames)?;
+        let rest = self.rest_at(query.as_ref())?;
         let offset =
-            (lbs(&w, &skinning, &self.rest)? - self.initial_posing(&init, &skinning, b)?)?;
+            (lbs(&w, &skinning, &rest)? - self.initial_posing(&init, &skinning, &rest, b)?)?;
         // m² → cm².
         let position = (offset.sqr()?.sum_all()? * (1e4 / (b * v) as f64))?;
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
         let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
         let position_cm2 = f64::from(position.to_vec0::<f32>()?);
-        self.optimiser.backward_step(&total)?;
+        // cm² back to m², then relative to the diagonal.
+        let position_relative = (position_cm2 * 1e-4).sqrt() / self.diagonal;
+        timer.lap(&mut self.profile, KIND, Phase::Skinning);
+        let grads = total.backward()?;
+        timer.lap(&mut self.profile, KIND, Phase::Backward);
+        self.optimiser.step(&grads)?;
+        timer.lap(&mut self.profile, KIND, Phase::Optimiser);
+        self.profile.finish_iteration(KIND);
         self.warm_done += 1;
-        Ok(WarmRecord {
+        let record = WarmRecord {
             iteration: self.warm_done,
             kl,
             position_cm2,
-        })
+            position_relative,
+        };
+        self.note_warm(&record);
+        Ok(record)
     }
 
     /// One image-loss iteration on a seeded batch; returns its losses (before the step).
@@ -543,54 +827,58 @@ impl Trainer {
     /// parameter by lr at once.
     pub fn step(&mut self) -> Result<LossRecord, TrainError> {
         if self.done == 0 {
-            self.optimiser = Adam::from_varmap(&self.varmap, self.config.adam)?;
+            self.optimiser = Adam::from_varmap(
+                &self.varmap,
+                Self::adam_config(&self.config, self.is_static()),
+            )?;
         }
-        let ramp = self.config.lr_warmup;
-        let scale = if ramp == 0 {
-            1.0
-        } else {
-            ((self.done + 1) as f64 / ramp as f64).min(1.0)
-        };
-        self.optimiser.set_lr(self.config.adam.lr * scale);
+        if self.average.is_none() && self.config.ema_half_life > 0.0 {
+            self.average = Some(average::ParameterAverage::new(
+                &self.varmap,
+                self.config.ema_half_life,
+            )?);
+        }
+        self.optimiser.set_lr(self.image_lr(self.done));
+        const KIND: IterationKind = IterationKind::Image;
+        let mut timer = Timer::start();
         let frames = self.sample(PHASE_IMAGE, self.done);
         let query = self.draw_queries(PHASE_IMAGE, self.done)?;
         let w = self.weights_at(&frames, query.as_ref())?;
+        timer.lap(&mut self.profile, KIND, Phase::Forward);
         let b = frames.len();
         let skinning = self.frame_skinning(&frames)?;
-        let posed = lbs(&w, &skinning, &self.rest)?;
-        let posed_values = posed.to_vec3::<f32>()?;
-        let mut boundary = Vec::new();
-        let mut contour = Vec::new();
-        for (k, &f) in frames.iter().enumerate() {
-            let xk = posed.get(k)?;
-            let pts: Vec<glam::Vec3> = posed_values[k]
-                .iter()
-                .map(|p| glam::Vec3::new(p[0], p[1], p[2]))
-                .collect();
-            for view in &self.data.frames[f].views {
-                let uv = project(&view.camera, &xk)?;
-                let valid = in_front(&view.camera, &pts);
-                let t = silhouette_terms(&view.target, &uv, &valid, &self.data.template.triangles)?;
-                boundary.push((t.boundary / t.boundary_count.max(1) as f64)?);
-                contour.push((t.contour / t.contour_count.max(1) as f64)?);
-            }
-        }
-        let mean = |ts: Vec<Tensor>| -> Result<Tensor, TrainError> {
-            let n = ts.len().max(1) as f64;
-            Ok(if ts.is_empty() {
-                Tensor::zeros((), DType::F32, &Device::Cpu)?
-            } else {
-                (Tensor::stack(&ts, 0)?.sum_all()? / n)?
+        let rest = self.rest_at(query.as_ref())?;
+        let posed = lbs(&w, &skinning, &rest)?;
+        timer.lap(&mut self.profile, KIND, Phase::Skinning);
+        let views: Vec<BatchView> = frames
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &f)| {
+                self.data.frames[f].views.iter().map(move |view| BatchView {
+                    frame: k,
+                    camera: view.camera.clone(),
+                    target: view.target.clone(),
+                })
             })
-        };
-        let sb = mean(boundary)?;
-        let sc = mean(contour)?;
+            .collect();
+        let silhouette = SilhouetteLoss::new(
+            views,
+            self.triangles.clone(),
+            self.edges.clone(),
+            self.config.silhouette_huber_px,
+        )
+        .apply(&posed)?;
+        let sb = silhouette.get(0)?;
+        let sc = silhouette.get(1)?;
+        let (sb_px, sc_px) = (silhouette.get(2)?, silhouette.get(3)?);
+        timer.lap(&mut self.profile, KIND, Phase::Silhouette);
         let v = self.data.template.vertex_count() as f64;
         let lap_input = match self.config.laplacian_reference {
             LaplacianReference::Absolute => posed.clone(),
             // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
             LaplacianReference::InitialSkinning => {
-                (&posed - self.initial_posing(&self.init_at(query.as_ref())?, &skinning, b)?)?
+                let init = self.init_at(query.as_ref())?;
+                (&posed - self.initial_posing(&init, &skinning, &rest, b)?)?
             }
         };
         let lap = (self.laplacian.loss(&lap_input)? / (b as f64 * v))?;
@@ -605,20 +893,29 @@ impl Trainer {
             (&part * lw.partwise)?,
         ];
         let mut terms = terms.to_vec();
+        timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         terms.extend(self.rendering_term(&frames, &posed)?);
+        timer.lap(&mut self.profile, KIND, Phase::Rendering);
         let total = Tensor::stack(&terms, 0)?.sum_all()?;
         let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
         self.done += 1;
         let record = LossRecord {
             iteration: self.done,
             total: val(&total)?,
-            silhouette_boundary: val(&sb)?,
-            silhouette_contour: val(&sc)?,
+            silhouette_boundary: val(&sb_px)?,
+            silhouette_contour: val(&sc_px)?,
             laplacian: val(&lap)?,
             skinning: val(&skin)?,
             partwise: val(&part)?,
         };
-        self.optimiser.backward_step(&total)?;
+        let grads = total.backward()?;
+        timer.lap(&mut self.profile, KIND, Phase::Backward);
+        self.optimiser.step(&grads)?;
+        if let Some(a) = &mut self.average {
+            a.update()?;
+        }
+        timer.lap(&mut self.profile, KIND, Phase::Optimiser);
+        self.profile.finish_iteration(KIND);
         Ok(record)
     }
 
@@ -639,6 +936,21 @@ impl Trainer {
             .map(|(k, v)| (format!("{prefix}{k}"), v))
             .collect();
         insert_varmap(&mut tensors, &format!("{prefix}param."), &self.varmap)?;
+        if let Some(a) = &self.average {
+            for (k, v) in a.state_tensors()? {
+                tensors.insert(format!("{prefix}{k}"), v);
+            }
+        }
+        let window: Vec<f64> = self.warm_window.iter().flat_map(|w| [w.0, w.1]).collect();
+        let n = self.warm_window.len();
+        tensors.insert(
+            format!("{prefix}warm.window"),
+            Tensor::from_vec(window, (n, 2), &Device::Cpu)?,
+        );
+        tensors.insert(
+            format!("{prefix}warm.converged"),
+            Tensor::new(&[u32::from(self.warm_converged)], &Device::Cpu)?,
+        );
         let p = [self.warm_done, self.done].map(split_u64).concat();
         tensors.insert(
             format!("{prefix}progress"),
@@ -673,9 +985,30 @@ impl Trainer {
         self.optimiser
             .load_state_tensors(&state)
             .map_err(|e| bad(e.to_string()))?;
+        self.average = if state.contains_key("avg.weight") {
+            let mut a = average::ParameterAverage::new(&self.varmap, self.config.ema_half_life)?;
+            a.load_state_tensors(&state)
+                .map_err(|e| bad(e.to_string()))?;
+            Some(a)
+        } else {
+            None
+        };
         let p = read_u64s(tensors, &format!("{prefix}progress"), 2).map_err(bad)?;
         self.warm_done = p[0];
         self.done = p[1];
+        let window = tensors
+            .get(&format!("{prefix}warm.window"))
+            .ok_or_else(|| bad(format!("`{prefix}warm.window` is missing")))?
+            .to_vec2::<f64>()
+            .map_err(|e| bad(format!("`{prefix}warm.window`: {e}")))?;
+        self.warm_window = window.iter().map(|r| (r[0], r[1])).collect();
+        self.warm_converged = tensors
+            .get(&format!("{prefix}warm.converged"))
+            .ok_or_else(|| bad(format!("`{prefix}warm.converged` is missing")))?
+            .to_vec1::<u32>()
+            .map_err(|e| bad(format!("`{prefix}warm.converged`: {e}")))?
+            .first()
+            .is_some_and(|&c| c != 0);
         Ok(())
     }
 
@@ -694,7 +1027,11 @@ impl Trainer {
         let csv_path = dir.join("losses.csv");
         let mut csv = reopen_log(&csv_path, LossRecord::CSV_HEADER, self.done)?;
         let warm_path = dir.join("warm_start.csv");
-        let mut warm_csv = reopen_log(&warm_path, "iteration,kl,position_cm2", self.warm_done)?;
+        let mut warm_csv = reopen_log(
+            &warm_path,
+            "iteration,kl,position_cm2,position_relative",
+            self.warm_done,
+        )?;
         let total = self.config.warm_start_iterations + self.config.iterations;
         let bar = if progress {
             indicatif::ProgressBar::new(total)
@@ -709,12 +1046,12 @@ impl Trainer {
         );
         bar.set_position(self.warm_done + self.done);
         let ckpt = dir.join("checkpoint.safetensors");
-        while self.warm_done < self.config.warm_start_iterations {
+        while self.warm_pending() {
             let r = self.warm_step()?;
             writeln!(
                 warm_csv,
-                "{},{:.6e},{:.6e}",
-                r.iteration, r.kl, r.position_cm2
+                "{},{:.6e},{:.6e},{:.6e}",
+                r.iteration, r.kl, r.position_cm2, r.position_relative
             )
             .map_err(io(&warm_path))?;
             bar.set_message(format!(
@@ -730,6 +1067,10 @@ impl Trainer {
             }
         }
         warm_csv.flush().map_err(io(&warm_path))?;
+        if self.warm_converged && self.warm_done < self.config.warm_start_iterations {
+            // The skipped warm-start iterations leave the progress bar.
+            bar.set_length(self.warm_done + self.config.iterations);
+        }
         while self.done < self.config.iterations {
             let r = self.step()?;
             writeln!(csv, "{}", r.csv_row()).map_err(io(&csv_path))?;
@@ -752,6 +1093,8 @@ impl Trainer {
         }
         csv.flush().map_err(io(&csv_path))?;
         self.save_checkpoint(&ckpt)?;
+        let profile_path = dir.join("profile.csv");
+        std::fs::write(&profile_path, self.profile.csv()).map_err(io(&profile_path))?;
         bar.finish();
         Ok(())
     }

@@ -49,6 +49,9 @@ fn images(data: &TrainData, truth: &[f32], texture: impl Fn(Vec3) -> Vec3) -> Ve
 
 fn stage_config(albedo: u64, shadow: u64, refine: u64) -> TrainConfig {
     TrainConfig {
+        // A constant rate: the resume tests stop runs by giving them fewer iterations, which
+        // would otherwise change the cosine schedule of the iterations that remain.
+        lr_final_fraction: 1.0,
         stages: StageConfig {
             albedo_iterations: albedo,
             shadow_iterations: shadow,
@@ -282,7 +285,7 @@ fn loaded_images_are_blurred_inside_their_masks_only() {
     assert!(changed > 0, "the blur changed no foreground pixel");
     // A mask of another size is a typed error naming the file, not read out of bounds.
     let path = capture.mask_path(0, f);
-    skinfield_formats::capture::write_mask_png(&path, 3, 2, &[true; 6]).unwrap();
+    skinfield_formats::capture::write_mask_png(&path, 3, 2, &[1.0; 6]).unwrap();
     match load_images(&capture, &options, 1.5) {
         Err(e @ DataError::Capture(_)) => {
             let m = e.to_string();

@@ -1,0 +1,322 @@
+//! The fused op against candle's graph: forward values and the gradient of every parameter, on
+//! random nets of several shapes and on a trained net read back from a `.skf`.
+
+use candle_core::{DType, Device, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use skinfield_formats::skf::{ModelConfig, SkfView};
+
+use super::ParamLayout;
+use crate::optim::{Adam, AdamConfig};
+use crate::skinnet::export::to_skf_model;
+use crate::skinnet::{Activation, Backend, PREFIX, SkinNet, encode_positions};
+
+fn random_points(n: usize, seed: u64) -> Vec<Vec3> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| {
+            Vec3::new(
+                rng.random_range(-0.9..0.9),
+                rng.random_range(-0.9..0.9),
+                rng.random_range(-0.9..0.9),
+            )
+        })
+        .collect()
+}
+
+fn random_values(n: usize, scale: f32, seed: u64) -> Vec<f32> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n).map(|_| rng.random_range(-scale..scale)).collect()
+}
+
+/// A net of `config` whose variables are a copy of `vars` in `dtype` (so the same parameters can
+/// be run through both backends and both precisions).
+fn copy_net(config: ModelConfig, vars: &VarMap, dtype: DType) -> (SkinNet, VarMap) {
+    let copy = VarMap::new();
+    {
+        let src = vars.data().lock().unwrap();
+        let mut dst = copy.data().lock().unwrap();
+        for (k, v) in src.iter() {
+            dst.insert(
+                k.clone(),
+                Var::from_tensor(&v.as_tensor().to_dtype(dtype).unwrap()).unwrap(),
+            );
+        }
+    }
+    let vb = VarBuilder::from_varmap(&copy, dtype, &Device::Cpu);
+    (SkinNet::new(&vb.pp(PREFIX), config).unwrap(), copy)
+}
+
+/// A loss that weighs every output differently and is not linear in it, so every path of the
+/// backward pass (softmax included) carries a distinct gradient.
+fn loss(w: &Tensor, target: &Tensor) -> Tensor {
+    let t = target.to_dtype(w.dtype()).unwrap();
+    ((w - &t).unwrap().sqr().unwrap() * 3.0)
+        .unwrap()
+        .add(&(w * &t).unwrap())
+        .unwrap()
+        .sum_all()
+        .unwrap()
+}
+
+/// Forward values and per-parameter gradients of the fused op against candle's composite graph
+/// evaluated in f64: every element within `1e-4` of the reference tensor's largest magnitude.
+fn check_against_candle(
+    config: ModelConfig,
+    vars: &VarMap,
+    frames: usize,
+    points: usize,
+    seed: u64,
+) {
+    check_masked(config, vars, frames, points, seed, None);
+}
+
+/// [`check_against_candle`] with an optional additive mask `[points, J]` on the logits.
+fn check_masked(
+    config: ModelConfig,
+    vars: &VarMap,
+    frames: usize,
+    points: usize,
+    seed: u64,
+    mask: Option<&Tensor>,
+) {
+    let dev = Device::Cpu;
+    let enc = encode_positions(&config, &random_points(points, seed), &dev).unwrap();
+    let q = config.pose_width();
+    let poses =
+        Tensor::from_vec(random_values(frames * q, 1.5, seed + 1), (frames, q), &dev).unwrap();
+    let j = config.joint_count as usize;
+    let target = Tensor::from_vec(
+        random_values(frames * points * j, 1.0, seed + 2),
+        (frames, points, j),
+        &dev,
+    )
+    .unwrap();
+
+    let (fused, fused_vars) = copy_net(config, vars, DType::F32);
+    let w_fused = fused.forward_masked(&enc, &poses, mask).unwrap();
+    let g_fused = loss(&w_fused, &target).backward().unwrap();
+
+    let (reference, ref_vars) = copy_net(config, vars, DType::F64);
+    let reference = reference.with_backend(Backend::Candle(Activation::Composite));
+    let w_ref = reference
+        .forward_masked(
+            &enc.to_dtype(DType::F64).unwrap(),
+            &poses.to_dtype(DType::F64).unwrap(),
+            mask,
+        )
+        .unwrap();
+    let g_ref = loss(&w_ref, &target).backward().unwrap();
+
+    let a = w_fused.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let b = w_ref.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+    if let Some(m) = mask {
+        // Masked joints weigh exactly zero, every frame.
+        let m = m.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        for (i, w) in a.iter().enumerate() {
+            if m[i % m.len()] == f32::NEG_INFINITY {
+                assert_eq!(*w, 0.0, "masked weight {i}");
+            }
+        }
+    }
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (f64::from(*x) - y).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "weights differ by {worst}");
+
+    let fused_map = fused_vars.data().lock().unwrap();
+    let ref_map = ref_vars.data().lock().unwrap();
+    let mut checked = 0;
+    for (name, var) in fused_map.iter() {
+        let got = g_fused
+            .get(var.as_tensor())
+            .unwrap_or_else(|| panic!("no fused gradient for {name}"))
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        let want = g_ref
+            .get(ref_map[name].as_tensor())
+            .unwrap_or_else(|| panic!("no reference gradient for {name}"))
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f64>()
+            .unwrap();
+        let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0, "{name}: reference gradient is zero");
+        for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+            let err = (f64::from(*g) - w).abs() / scale;
+            assert!(
+                err <= 1e-4,
+                "{name}[{i}]: fused {g} vs candle {w} (rel {err:.2e})"
+            );
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 3 * fused.layers().len());
+}
+
+fn seeded_vars(config: ModelConfig, seed: u64) -> VarMap {
+    SkinNet::seeded(config, seed, 1.0).unwrap().1
+}
+
+#[test]
+fn gradients_equal_candle_on_random_nets() {
+    // The paper's architecture, a narrow net with the skip into the second layer, and a net
+    // without a skip layer.
+    let paper = ModelConfig::vinecs(5, [-1.0; 3], [1.0; 3]);
+    let mut narrow = paper;
+    narrow.hidden_count = 3;
+    narrow.hidden = [0; skinfield_formats::skf::MAX_HIDDEN_LAYERS];
+    narrow.hidden[..3].copy_from_slice(&[24, 16, 20]);
+    narrow.skip_layer = 1;
+    narrow.pe_frequencies = 2;
+    let mut no_skip = narrow;
+    no_skip.skip_layer = 0;
+    no_skip.joint_count = 3;
+    for (k, config) in [paper, narrow, no_skip].into_iter().enumerate() {
+        check_against_candle(config, &seeded_vars(config, 10 + k as u64), 3, 37, k as u64);
+    }
+}
+
+#[test]
+fn masked_gradients_equal_candle() {
+    // Each point keeps 1–4 of 7 joints (a seeded pattern), as candidate masks do.
+    let config = ModelConfig::vinecs(7, [-1.0; 3], [1.0; 3]);
+    let points = 29;
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let lists: Vec<Vec<u16>> = (0..points)
+        .map(|_| {
+            let n = rng.random_range(1..=4);
+            let mut l: Vec<u16> = (0..7).collect();
+            for i in 0..n {
+                let k = rng.random_range(i..7);
+                l.swap(i, k);
+            }
+            let mut l = l[..n].to_vec();
+            l.sort_unstable();
+            l
+        })
+        .collect();
+    let mask = Tensor::from_vec(
+        crate::candidates::additive_mask(&lists, 7),
+        (points, 7),
+        &Device::Cpu,
+    )
+    .unwrap();
+    check_masked(config, &seeded_vars(config, 33), 3, points, 8, Some(&mask));
+}
+
+#[test]
+fn gradients_equal_candle_on_a_trained_net_read_from_a_skf() {
+    // Train a small paper-shaped net towards peaked, position-dependent weights (so its
+    // softmax saturates as a trained SkinNet's does), export it, read it back and compare.
+    let config = ModelConfig::vinecs(4, [-1.0; 3], [1.0; 3]);
+    let (net, varmap) = SkinNet::seeded(config, 3, 0.1).unwrap();
+    let dev = Device::Cpu;
+    let pts = random_points(64, 9);
+    let enc = encode_positions(&config, &pts, &dev).unwrap();
+    let poses = Tensor::zeros((1, config.pose_width()), DType::F32, &dev).unwrap();
+    let target: Vec<f32> = pts
+        .iter()
+        .flat_map(|p| {
+            let k = usize::from(p.x > 0.0) + 2 * usize::from(p.y > 0.0);
+            (0..4).map(move |j| if j == k { 0.97 } else { 0.01 })
+        })
+        .collect();
+    let target = Tensor::from_vec(target, (1, 64, 4), &dev).unwrap();
+    let mut opt = Adam::from_varmap(
+        &varmap,
+        AdamConfig {
+            lr: 1e-2,
+            ..AdamConfig::default()
+        },
+    )
+    .unwrap();
+    for _ in 0..40 {
+        let w = net.forward(&enc, &poses).unwrap();
+        opt.backward_step(&(w - &target).unwrap().sqr().unwrap().sum_all().unwrap())
+            .unwrap();
+    }
+    let skeleton = crate::skinnet::tests::skeleton(4);
+    let bytes = to_skf_model(&net, &skeleton).unwrap().to_bytes().unwrap();
+    let view = SkfView::parse(&bytes).unwrap();
+    let (loaded, vars) = SkinNet::from_skf(&view).unwrap();
+    check_against_candle(*loaded.config(), &vars, 4, 50, 21);
+}
+
+#[test]
+fn a_step_is_deterministic_and_a_second_backward_recomputes() {
+    let config = ModelConfig::vinecs(6, [-1.0; 3], [1.0; 3]);
+    let (net, varmap) = SkinNet::seeded(config, 5, 1.0).unwrap();
+    let dev = Device::Cpu;
+    let enc = encode_positions(&config, &random_points(40, 2), &dev).unwrap();
+    let q = config.pose_width();
+    let poses = Tensor::from_vec(random_values(2 * q, 1.0, 3), (2, q), &dev).unwrap();
+    let target = Tensor::from_vec(random_values(2 * 40 * 6, 1.0, 4), (2, 40, 6), &dev).unwrap();
+    let grads = |l: &Tensor| {
+        let g = l.backward().unwrap();
+        let vars = varmap.data().lock().unwrap();
+        let mut names: Vec<_> = vars.keys().cloned().collect();
+        names.sort();
+        names
+            .iter()
+            .flat_map(|n| {
+                g.get(vars[n].as_tensor())
+                    .unwrap()
+                    .flatten_all()
+                    .unwrap()
+                    .to_vec1::<f32>()
+                    .unwrap()
+            })
+            .collect::<Vec<f32>>()
+    };
+    let l1 = loss(&net.forward(&enc, &poses).unwrap(), &target);
+    let first = grads(&l1);
+    // The same graph again: its saved activations were consumed, so the op recomputes them.
+    let again = grads(&l1);
+    let l2 = loss(&net.forward(&enc, &poses).unwrap(), &target);
+    let second = grads(&l2);
+    assert_eq!(first, second, "two identical steps differ");
+    assert_eq!(first, again, "the recomputing backward differs");
+}
+
+#[test]
+fn the_layout_matches_the_packed_parameters() {
+    let config = ModelConfig::vinecs(7, [-1.0; 3], [1.0; 3]);
+    let (net, _vars) = SkinNet::seeded(config, 1, 1.0).unwrap();
+    let layout = ParamLayout::new(&config);
+    let packed = net.packed_parameters().unwrap().to_vec1::<f32>().unwrap();
+    assert_eq!(packed.len(), layout.len());
+    for (i, layer) in net.layers().iter().enumerate() {
+        let [rv, rg, rb] = layout.ranges(i);
+        let (v, g, b) = layer.parts();
+        assert_eq!(
+            &packed[rv],
+            v.flatten_all().unwrap().to_vec1::<f32>().unwrap()
+        );
+        assert_eq!(&packed[rg], g.to_vec1::<f32>().unwrap());
+        assert_eq!(&packed[rb], b.to_vec1::<f32>().unwrap());
+    }
+}
+
+#[test]
+fn the_buffer_pool_reuses_allocations() {
+    let pool = super::BufferPool::default();
+    let a = pool.take(1000);
+    assert_eq!(a.len(), 1000);
+    let ptr = a.as_ptr();
+    pool.give([a]);
+    let b = pool.take(800);
+    assert_eq!(b.as_ptr(), ptr, "the pooled allocation was not reused");
+    assert_eq!(b.len(), 800);
+    // The pool is empty again: a new allocation, and a larger request grows.
+    let c = pool.take(10);
+    assert_ne!(c.as_ptr(), ptr);
+    pool.give([b, c]);
+    assert_eq!(pool.take(5000).len(), 5000);
+}
