@@ -5,4 +5,6 @@
 #[path = "../../runtime/tests/common/mod.rs"]
 mod fixtures;
 
-pub use fixtures::{BBOX_MAX, BBOX_MIN, random_points, random_pose, rng, skeleton, vinecs_bytes};
+pub use fixtures::{
+    BBOX_MAX, BBOX_MIN, ellipsoid, random_points, random_pose, rng, skeleton, vinecs_bytes,
+};

@@ -72,6 +72,36 @@ pub enum RuntimeError {
         /// The field that does not fit.
         field: &'static str,
     },
+    /// State derived from a frame (the fast path's nodes) was computed for another pose.
+    #[error("`{field}` was computed for another pose: update it after set_pose")]
+    Stale {
+        /// The out-of-date field.
+        field: &'static str,
+    },
+    /// An index refers past the end of what it indexes.
+    #[error("`{field}`[{index}] refers to {value}, but there are only {limit}")]
+    Index {
+        /// The field holding the index.
+        field: &'static str,
+        /// Position of the bad entry.
+        index: usize,
+        /// The bad index.
+        value: u32,
+        /// How many there are.
+        limit: usize,
+    },
+    /// A setting is outside its accepted range.
+    #[error("`{field}` = {value} is outside {min}..={max}")]
+    Setting {
+        /// The setting.
+        field: &'static str,
+        /// Its value.
+        value: usize,
+        /// Smallest accepted value.
+        min: usize,
+        /// Largest accepted value.
+        max: usize,
+    },
     /// The frame state has no pose yet.
     #[error("the frame state has no pose: call set_pose or set_matrices first")]
     NoPose,

@@ -3,6 +3,7 @@
 
 use alloc::vec;
 use alloc::vec::Vec;
+use core::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Mat4;
 use skinfield_formats::{Pose, Skeleton, pose_features};
@@ -104,6 +105,8 @@ impl Palette {
     }
 }
 
+static NEXT_POSE: AtomicU64 = AtomicU64::new(1);
+
 /// Everything a SkinNet frame needs besides the mesh: the palette, the pose features and the
 /// per-frame bias of every layer.
 #[derive(Clone, Debug)]
@@ -113,6 +116,9 @@ pub struct FrameState {
     features: Vec<f32>,
     frame_bias: Vec<f32>,
     ready: bool,
+    /// Unique id of the last successful pose (process-wide), so state derived from a pose (the
+    /// fast path's nodes) can tell whether it is current.
+    generation: u64,
 }
 
 impl FrameState {
@@ -126,6 +132,7 @@ impl FrameState {
             features: vec![0.0; l.pose_w],
             frame_bias: vec![0.0; l.frame_bias_len],
             ready: false,
+            generation: 0,
         }
     }
 
@@ -161,6 +168,7 @@ impl FrameState {
             });
         }
         self.ready = true;
+        self.generation = NEXT_POSE.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
 
@@ -184,6 +192,10 @@ impl FrameState {
 
     pub(crate) fn model_id(&self) -> u64 {
         self.model_id
+    }
+
+    pub(crate) fn generation(&self) -> u64 {
+        self.generation
     }
 
     pub(crate) fn frame_bias(&self) -> &[f32] {

@@ -15,7 +15,11 @@
 //!    vertex range (so an engine's job system can split a frame; the `rayon` feature has a
 //!    ready-made parallel run in [`parallel`]).
 //! 4. **Static skinning**: [`StaticSkinJob`] does the same with a [`StaticSkin`].
-//! 5. **Level of detail** (`resample` feature): the `resample` module simplifies or subdivides
+//! 5. **Fast path**: [`FastMesh::bind`] picks a few hundred nodes of the mesh; per frame
+//!    [`FastFrame::update`] evaluates SkinNet at those nodes only and [`FastSkinJob`] /
+//!    [`TopKJob`] give every vertex interpolated weights (skinned, or as the top-k influences
+//!    an engine's own skinning shader takes), so the MLP cost no longer grows with the mesh.
+//! 6. **Level of detail** (`resample` feature): the `resample` module simplifies or subdivides
 //!    a canonical mesh at load time; the result binds like any other mesh, same weight file.
 //!
 //! No function here panics on any input: bad slices, NaN poses and mismatched parts are typed
@@ -28,6 +32,7 @@ pub mod activation;
 pub mod bind;
 pub mod candidates;
 pub mod error;
+pub mod fast;
 pub mod frame;
 #[cfg(feature = "gpu")]
 pub mod gpu;
@@ -43,6 +48,9 @@ pub mod static_job;
 
 pub use bind::{BoundMesh, positional_encoding};
 pub use error::RuntimeError;
+pub use fast::{
+    FastFrame, FastMesh, FastOptions, FastSkinJob, Influence, TopKIndices, TopKJob, TopKWeights,
+};
 pub use frame::{FrameState, Palette};
 pub use job::{Scratch, SkinJob, WeightsJob};
 pub use kernels::{Kernel, TILE};

@@ -86,13 +86,27 @@ pub(crate) fn lbs(
     apply_matrix(&m, p, n, t)
 }
 
-fn apply_matrix(m: &Mat4, p: Vec3, n: Vec3, t: Vec4) -> Skinned {
-    let tan = m.transform_vector3(t.truncate()).normalize_or_zero();
+/// Applies a blended skinning matrix to a position, normal (cofactor) and tangent.
+pub(crate) fn apply_matrix(m: &Mat4, p: Vec3, n: Vec3, t: Vec4) -> Skinned {
     Skinned {
         position: m.transform_point3(p),
-        normal: (cofactor(m) * n).normalize_or_zero(),
-        tangent: tan.extend(t.w),
+        normal: lbs_normal(m, n),
+        tangent: lbs_tangent(m, t),
     }
+}
+
+/// A normal under a blended skinning matrix (cofactor: right for non-rigid blends).
+#[inline]
+pub(crate) fn lbs_normal(m: &Mat4, n: Vec3) -> Vec3 {
+    (cofactor(m) * n).normalize_or_zero()
+}
+
+/// A tangent under a blended skinning matrix, handedness `w` kept.
+#[inline]
+pub(crate) fn lbs_tangent(m: &Mat4, t: Vec4) -> Vec4 {
+    m.transform_vector3(t.truncate())
+        .normalize_or_zero()
+        .extend(t.w)
 }
 
 /// DQS of one vertex; falls back to LBS where the blended rotation vanishes (weights that

@@ -7,7 +7,8 @@ use skinfield_formats::StaticSkin;
 use crate::error::RuntimeError;
 use crate::frame::Palette;
 use crate::job::check_attr;
-use crate::skinning::{Method, dqs, lbs};
+use crate::kernels::{Kernel, blend};
+use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
 
 /// Skins `out_positions.len()` vertices from `first_vertex` with static weights.
 pub struct StaticSkinJob<'a> {
@@ -87,23 +88,40 @@ impl StaticSkinJob<'_> {
     pub fn run(&mut self) -> Result<(), RuntimeError> {
         self.validate()?;
         let (mats, dq) = (self.palette.matrices(), self.palette.dual_quats());
+        let kernel = Kernel::detect();
         for i in 0..self.out_positions.len() {
             let v = self.first_vertex + i;
             let (joints, weights) = self.skin.influences(v);
             let infl = joints.iter().zip(weights).map(|(&j, &w)| (j as usize, w));
-            let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
-            let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
             let p = self.rest_positions[v];
-            let s = match self.method {
-                Method::Lbs => lbs(mats, infl, p, n, t),
-                Method::Dqs => dqs(mats, dq, infl, p, n, t),
-            };
-            self.out_positions[i] = s.position;
-            if let Some(o) = self.out_normals.as_deref_mut() {
-                o[i] = s.normal;
-            }
-            if let Some(o) = self.out_tangents.as_deref_mut() {
-                o[i] = s.tangent;
+            match self.method {
+                Method::Lbs => {
+                    // Only the requested outputs are computed.
+                    let mut m = glam::Mat4::ZERO;
+                    blend(kernel, &mut m, mats, infl);
+                    self.out_positions[i] = m.transform_point3(p);
+                    if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals)
+                    {
+                        o[i] = lbs_normal(&m, r[v]);
+                    }
+                    if let (Some(o), Some(r)) =
+                        (self.out_tangents.as_deref_mut(), self.rest_tangents)
+                    {
+                        o[i] = lbs_tangent(&m, r[v]);
+                    }
+                }
+                Method::Dqs => {
+                    let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
+                    let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
+                    let s = dqs(mats, dq, infl, p, n, t);
+                    self.out_positions[i] = s.position;
+                    if let Some(o) = self.out_normals.as_deref_mut() {
+                        o[i] = s.normal;
+                    }
+                    if let Some(o) = self.out_tangents.as_deref_mut() {
+                        o[i] = s.tangent;
+                    }
+                }
             }
         }
         Ok(())

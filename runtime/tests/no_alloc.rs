@@ -9,8 +9,8 @@ use std::cell::Cell;
 use glam::{Vec3, Vec4};
 use skinfield_formats::StaticSkin;
 use skinfield_runtime::{
-    BoundMesh, FrameState, Method, Palette, Scratch, SkinJob, SkinNetModel, StaticSkinJob,
-    WeightsJob,
+    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Palette,
+    Scratch, SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob, TopKWeights, WeightsJob,
 };
 
 struct Counting;
@@ -80,6 +80,22 @@ fn per_frame_path_does_not_allocate() {
     );
     let mut bad = poses[0].clone();
     bad.locals[4].translation.x = f32::NAN;
+    // The fast path on a closed mesh (bind allocates; frames must not).
+    let (fp, fnrm, ftri) = common::ellipsoid(8, 12);
+    let fast = FastMesh::bind(
+        &model,
+        &fp,
+        &ftri,
+        &FastOptions {
+            nodes: 40,
+            ..FastOptions::DEFAULT
+        },
+    )
+    .unwrap();
+    let mut nodes = FastFrame::new(&fast);
+    let fnv = fp.len();
+    let (mut fpos, mut fn_out) = (vec![Vec3::ZERO; fnv], vec![Vec3::ZERO; fnv]);
+    let (mut tj, mut tw) = (vec![0u8; fnv * 8], vec![0u16; fnv * 8]);
 
     let count = count_allocations(|| {
         for pose in &poses {
@@ -125,6 +141,36 @@ fn per_frame_path_does_not_allocate() {
             }
             .run()
             .unwrap();
+            nodes.update(&model, &fast, &frame, &mut scratch).unwrap();
+            for method in [Method::Lbs, Method::Dqs] {
+                FastSkinJob {
+                    mesh: &fast,
+                    frame: &frame,
+                    nodes: &nodes,
+                    method,
+                    influences: 8,
+                    first_vertex: 0,
+                    rest_normals: Some(&fnrm),
+                    rest_tangents: None,
+                    out_positions: &mut fpos,
+                    out_normals: Some(&mut fn_out),
+                    out_tangents: None,
+                    out_weights: None,
+                }
+                .run()
+                .unwrap();
+            }
+            TopKJob {
+                mesh: &fast,
+                frame: &frame,
+                nodes: &nodes,
+                influences: 8,
+                first_vertex: 0,
+                out_indices: TopKIndices::U8(&mut tj),
+                out_weights: TopKWeights::Unorm16(&mut tw),
+            }
+            .run()
+            .unwrap();
         }
         // Error paths do not allocate either.
         assert!(frame.set_pose(&model, &bad).is_err());
@@ -136,4 +182,5 @@ fn per_frame_path_does_not_allocate() {
         1
     );
     assert!(p.iter().all(|v| v.is_finite()));
+    assert!(fpos.iter().all(|v| v.is_finite()));
 }

@@ -67,6 +67,36 @@ pub struct GpuParams {
     pub layers: [GpuLayer; MAX_GPU_LAYERS],
 }
 
+/// Per-mesh constants of the fast-path kernels (`FastParams` in `shaders/fast.wgsl`, a uniform).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct GpuFastParams {
+    /// Vertices of the mesh.
+    pub vertex_count: u32,
+    /// Nodes SkinNet runs at.
+    pub node_count: u32,
+    /// Joints.
+    pub joint_count: u32,
+    /// Interpolation entries per vertex.
+    pub neighbours: u32,
+    /// Base entries per vertex (stored before the interpolation entries).
+    pub base_count: u32,
+    /// Joints per vertex for DQS.
+    pub dqs_k: u32,
+    /// Joints per vertex of the top-k output (4 or 8).
+    pub top_k: u32,
+    /// Bytes per top-k joint index (1 or 2).
+    pub index_bytes: u32,
+    /// Top-k weight format: 0 unorm8, 1 unorm16, 2 f32.
+    pub weight_format: u32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
+}
+
 /// A skinned vertex as written by the skinning kernels: the layout of the output vertex buffer
 /// (32-byte stride; `w` is 1 for the position and 0 for the normal).
 #[repr(C)]
@@ -111,6 +141,7 @@ const WEIGHTS_F32: &str = include_str!("../../../shaders/weights_f32.wgsl");
 const TERMS: &str = include_str!("../../../shaders/terms.wgsl");
 const SKINNET: &str = include_str!("../../../shaders/skinnet.wgsl");
 const SKIN: &str = include_str!("../../../shaders/skin.wgsl");
+const FAST: &str = include_str!("../../../shaders/fast.wgsl");
 
 /// The whole WGSL module for weights stored as `format`; f16 weights are decoded with
 /// `unpack2x16float` when `unpack2x16float` is true (needs the adapter's
@@ -122,7 +153,7 @@ pub fn shader_source(format: WeightFormat, unpack2x16float: bool) -> String {
         (WeightFormat::F16, false) => WEIGHTS_F16_BITS,
         (WeightFormat::F32, _) => WEIGHTS_F32,
     };
-    [COMMON, weights, TERMS, SKINNET, SKIN].join("\n")
+    [COMMON, weights, TERMS, SKINNET, SKIN, FAST].join("\n")
 }
 
 /// Entry points of the module.
@@ -133,14 +164,22 @@ pub(crate) mod entry {
     pub const SKINNET: &str = "skinnet_weights";
     pub const SKIN_LBS: &str = "skin_lbs";
     pub const SKIN_DQS: &str = "skin_dqs";
+    pub const FAST_RESIDUALS: &str = "fast_node_residuals";
+    pub const FAST_LBS: &str = "fast_skin_lbs";
+    pub const FAST_DQS: &str = "fast_skin_dqs";
+    pub const FAST_TOP_K: &str = "fast_top_k";
     #[cfg(test)]
-    pub const ALL: [&str; 6] = [
+    pub const ALL: [&str; 10] = [
         POSITION_TERMS,
         POSE_TERMS,
         JOINT_DQS,
         SKINNET,
         SKIN_LBS,
         SKIN_DQS,
+        FAST_RESIDUALS,
+        FAST_LBS,
+        FAST_DQS,
+        FAST_TOP_K,
     ];
 }
 
@@ -272,6 +311,34 @@ mod tests {
         );
         check(
             &m,
+            "FastParams",
+            size_of::<GpuFastParams>(),
+            &[
+                ("vertex_count", offset_of!(GpuFastParams, vertex_count)),
+                ("node_count", offset_of!(GpuFastParams, node_count)),
+                ("joint_count", offset_of!(GpuFastParams, joint_count)),
+                ("neighbours", offset_of!(GpuFastParams, neighbours)),
+                ("base_count", offset_of!(GpuFastParams, base_count)),
+                ("dqs_k", offset_of!(GpuFastParams, dqs_k)),
+                ("top_k", offset_of!(GpuFastParams, top_k)),
+                ("index_bytes", offset_of!(GpuFastParams, index_bytes)),
+                ("weight_format", offset_of!(GpuFastParams, weight_format)),
+                ("_pad0", offset_of!(GpuFastParams, _pad0)),
+                ("_pad1", offset_of!(GpuFastParams, _pad1)),
+                ("_pad2", offset_of!(GpuFastParams, _pad2)),
+            ],
+        );
+        check(
+            &m,
+            "Influence",
+            size_of::<crate::fast::Influence>(),
+            &[
+                ("index", offset_of!(crate::fast::Influence, index)),
+                ("weight", offset_of!(crate::fast::Influence, weight)),
+            ],
+        );
+        check(
+            &m,
             "Vertex",
             size_of::<SkinnedVertex>(),
             &[
@@ -309,6 +376,10 @@ mod tests {
         assert!(src.contains(&format!("const THREADS: u32 = {WORKGROUP_THREADS}u;")));
         assert!(src.contains(&format!("const TILE: u32 = {SKINNET_TILE}u;")));
         assert!(src.contains(&format!("const MAX_WIDTH: u32 = {MAX_GPU_WIDTH}u;")));
+        assert!(src.contains(&format!(
+            "const MAX_K: u32 = {}u;",
+            crate::fast::MAX_INFLUENCES
+        )));
         // Workgroup memory: MAX_WIDTH rows × TILE vertices of f32 within WebGPU's default 16 KiB.
         assert!(src.contains(&format!(
             "array<vec4<f32>, {}>",

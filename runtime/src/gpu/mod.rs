@@ -15,12 +15,17 @@
 //!   [`SkinnedVertex`] the engine can draw from.
 //! - [`GpuMesh::read_vertices`] and [`GpuMesh::read_weights`] read results back for tools and
 //!   tests.
+//! - Fast path: [`GpuSkinner::bind_fast_mesh`] uploads a CPU-bound [`crate::FastMesh`];
+//!   [`GpuSkinner::encode_fast`] runs SkinNet at its nodes only, then LBS, DQS or the top-k
+//!   output ([`GpuFastMesh`]).
 
+mod fast;
 mod layout;
 mod skinner;
 
+pub use fast::{FastOutputs, GpuFastMesh, GpuFastOptions, TopKIndexFormat, TopKWeightFormat};
 pub use layout::{
-    GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
+    GpuFastParams, GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
     WORKGROUP_THREADS, WeightFormat, shader_source,
 };
 pub use skinner::{GpuMesh, GpuModel, GpuSkinner, Skinning, position_encoding};
@@ -60,6 +65,16 @@ pub enum GpuError {
         len: usize,
         /// The required length.
         expected: usize,
+    },
+    /// A fast-path setting the kernels do not accept.
+    #[error("{field} = {value}: accepted {accepted}")]
+    Setting {
+        /// The setting.
+        field: &'static str,
+        /// Its value.
+        value: usize,
+        /// What is accepted.
+        accepted: &'static str,
     },
     /// A mesh without vertices.
     #[error("mesh: no vertices")]

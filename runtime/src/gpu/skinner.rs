@@ -32,10 +32,11 @@ struct FormatPipelines {
 pub struct GpuSkinner {
     f16: FormatPipelines,
     f32: FormatPipelines,
-    joint_dqs: wgpu::ComputePipeline,
+    pub(super) joint_dqs: wgpu::ComputePipeline,
     lbs: wgpu::ComputePipeline,
     dqs: wgpu::ComputePipeline,
-    limits: wgpu::Limits,
+    pub(super) fast: super::fast::FastPipelines,
+    pub(super) limits: wgpu::Limits,
 }
 
 /// A SkinNet bound to a device: weights and biases in storage buffers.
@@ -52,21 +53,22 @@ pub struct GpuModel {
 pub struct GpuMesh {
     format: WeightFormat,
     vertex_count: u32,
-    joint_count: usize,
+    pub(super) joint_count: usize,
     pose_width: usize,
     term_count: u32,
     features: wgpu::Buffer,
-    joint_mats: wgpu::Buffer,
-    skin_weights: wgpu::Buffer,
+    pub(super) joint_mats: wgpu::Buffer,
+    pub(super) joint_dqs: wgpu::Buffer,
+    pub(super) skin_weights: wgpu::Buffer,
     output: wgpu::Buffer,
     bind_pose_terms: wgpu::BindGroup,
-    bind_joint_dqs: wgpu::BindGroup,
+    pub(super) bind_joint_dqs: wgpu::BindGroup,
     bind_skinnet: wgpu::BindGroup,
     bind_lbs: wgpu::BindGroup,
     bind_dqs: wgpu::BindGroup,
 }
 
-fn pipeline(
+pub(super) fn pipeline(
     device: &wgpu::Device,
     module: &wgpu::ShaderModule,
     entry_point: &str,
@@ -215,6 +217,7 @@ impl GpuSkinner {
             joint_dqs: pipeline(device, &m16, entry::JOINT_DQS),
             lbs: pipeline(device, &m16, entry::SKIN_LBS),
             dqs: pipeline(device, &m16, entry::SKIN_DQS),
+            fast: super::fast::FastPipelines::new(device, &m16),
             limits,
         })
     }
@@ -226,12 +229,12 @@ impl GpuSkinner {
         }
     }
 
-    fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>, groups: u32) {
+    pub(super) fn dispatch(&self, pass: &mut wgpu::ComputePass<'_>, groups: u32) {
         let (x, y) = split_dispatch(groups, self.limits.max_compute_workgroups_per_dimension);
         pass.dispatch_workgroups(x, y, 1);
     }
 
-    fn check_groups(&self, what: &'static str, groups: u64) -> Result<u32, GpuError> {
+    pub(super) fn check_groups(&self, what: &'static str, groups: u64) -> Result<u32, GpuError> {
         let max = u64::from(self.limits.max_compute_workgroups_per_dimension);
         let limit = max * max;
         match u32::try_from(groups) {
@@ -244,7 +247,7 @@ impl GpuSkinner {
         }
     }
 
-    fn storage(
+    pub(super) fn storage(
         &self,
         device: &wgpu::Device,
         label: &'static str,
@@ -260,7 +263,7 @@ impl GpuSkinner {
         }))
     }
 
-    fn storage_init(
+    pub(super) fn storage_init(
         &self,
         device: &wgpu::Device,
         label: &'static str,
@@ -552,6 +555,7 @@ impl GpuSkinner {
             bind_dqs: group(&self.dqs, &[0, 9, 10, 11, 12]),
             features,
             joint_mats,
+            joint_dqs,
             skin_weights,
             output,
         };
@@ -605,17 +609,11 @@ impl GpuSkinner {
     /// DQS into [`GpuMesh::output`]. The frame's inputs come from the last
     /// [`GpuSkinner::upload_frame`] (queue writes land before the next submission).
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, mesh: &GpuMesh, mode: Skinning) {
-        let pipes = self.pipelines(mesh.format);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("skinfield frame"),
             timestamp_writes: None,
         });
-        pass.set_pipeline(&pipes.pose_terms);
-        pass.set_bind_group(0, &mesh.bind_pose_terms, &[]);
-        self.dispatch(&mut pass, mesh.term_count.div_ceil(WORKGROUP_THREADS));
-        pass.set_pipeline(&pipes.skinnet);
-        pass.set_bind_group(0, &mesh.bind_skinnet, &[]);
-        self.dispatch(&mut pass, mesh.vertex_count.div_ceil(SKINNET_TILE));
+        self.encode_weights(&mut pass, mesh);
         let vertex_groups = mesh.vertex_count.div_ceil(WORKGROUP_THREADS);
         match mode {
             Skinning::Linear => {
@@ -635,6 +633,17 @@ impl GpuSkinner {
                 self.dispatch(&mut pass, vertex_groups);
             }
         }
+    }
+
+    /// Records the pose terms and SkinNet with softmax over `mesh`'s vertices into `pass`.
+    pub(super) fn encode_weights(&self, pass: &mut wgpu::ComputePass<'_>, mesh: &GpuMesh) {
+        let pipes = self.pipelines(mesh.format);
+        pass.set_pipeline(&pipes.pose_terms);
+        pass.set_bind_group(0, &mesh.bind_pose_terms, &[]);
+        self.dispatch(pass, mesh.term_count.div_ceil(WORKGROUP_THREADS));
+        pass.set_pipeline(&pipes.skinnet);
+        pass.set_bind_group(0, &mesh.bind_skinnet, &[]);
+        self.dispatch(pass, mesh.vertex_count.div_ceil(SKINNET_TILE));
     }
 
     /// Uploads a frame, records it in a new encoder and submits it on `queue`.
@@ -670,7 +679,7 @@ impl GpuModel {
     }
 }
 
-fn read_buffer(
+pub(super) fn read_buffer(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     src: &wgpu::Buffer,

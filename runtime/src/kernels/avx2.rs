@@ -6,7 +6,8 @@ use core::arch::x86_64::*;
 
 use super::{LayerArgs, MR, TILE};
 use crate::activation::{
-    Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E, SOFTPLUS_EXP_MIN,
+    Act, EXP_MAX, EXP_MIN, EXP_P, EXP_TAIL, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E,
+    SOFTPLUS_EXP_MIN,
 };
 
 /// Vectors per vertex block (16 vertices).
@@ -46,6 +47,7 @@ fn exp_ps(z: __m256) -> __m256 {
 #[target_feature(enable = "avx2,fma")]
 fn log1p_ps(y: __m256) -> __m256 {
     let s = _mm256_div_ps(y, _mm256_add_ps(y, _mm256_set1_ps(2.0)));
+    // Clamped before squaring so tiny arguments never underflow (see `LOG1P_S_MIN`).
     let sc = _mm256_max_ps(s, _mm256_set1_ps(LOG1P_S_MIN));
     let z = _mm256_mul_ps(sc, sc);
     let mut q = _mm256_set1_ps(LOG1P_Q[0]);
@@ -160,7 +162,9 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
             let mut sum = _mm256_setzero_ps();
             for j in 0..rows {
                 let at = b.add(j * TILE + W * c);
-                let e = exp_ps(_mm256_sub_ps(_mm256_loadu_ps(at), m));
+                let z = _mm256_sub_ps(_mm256_loadu_ps(at), m);
+                let keep = _mm256_cmp_ps::<_CMP_GE_OQ>(z, _mm256_set1_ps(-EXP_TAIL));
+                let e = _mm256_and_ps(keep, exp_ps(z));
                 sum = _mm256_add_ps(sum, e);
                 _mm256_storeu_ps(at, e);
             }

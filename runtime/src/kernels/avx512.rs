@@ -6,7 +6,8 @@ use core::arch::x86_64::*;
 
 use super::{LayerArgs, MR, TILE};
 use crate::activation::{
-    Act, EXP_MAX, EXP_MIN, EXP_P, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E, SOFTPLUS_EXP_MIN,
+    Act, EXP_MAX, EXP_MIN, EXP_P, EXP_TAIL, LN2_HI, LN2_LO, LOG1P_Q, LOG1P_S_MIN, LOG2E,
+    SOFTPLUS_EXP_MIN,
 };
 
 const NV: usize = TILE / 16;
@@ -41,6 +42,7 @@ fn exp_ps(z: __m512) -> __m512 {
 #[target_feature(enable = "avx512f")]
 fn log1p_ps(y: __m512) -> __m512 {
     let s = _mm512_div_ps(y, _mm512_add_ps(y, _mm512_set1_ps(2.0)));
+    // Clamped before squaring so tiny arguments never underflow (see `LOG1P_S_MIN`).
     let sc = _mm512_max_ps(s, _mm512_set1_ps(LOG1P_S_MIN));
     let z = _mm512_mul_ps(sc, sc);
     let mut q = _mm512_set1_ps(LOG1P_Q[0]);
@@ -147,7 +149,9 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
             let mut sum = _mm512_setzero_ps();
             for j in 0..rows {
                 let at = b.add(j * TILE + 16 * c);
-                let e = exp_ps(_mm512_sub_ps(_mm512_loadu_ps(at), m));
+                let z = _mm512_sub_ps(_mm512_loadu_ps(at), m);
+                let keep = _mm512_cmp_ps_mask::<_CMP_GE_OQ>(z, _mm512_set1_ps(-EXP_TAIL));
+                let e = _mm512_maskz_mov_ps(keep, exp_ps(z));
                 sum = _mm512_add_ps(sum, e);
                 _mm512_storeu_ps(at, e);
             }

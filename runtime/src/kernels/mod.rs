@@ -15,9 +15,12 @@ use crate::activation::Act;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+mod blend;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
 mod scalar;
+
+pub(crate) use blend::blend;
 
 /// Vertices per tile (the GEMM's N dimension).
 pub const TILE: usize = 32;

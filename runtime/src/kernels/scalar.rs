@@ -3,7 +3,7 @@
 
 use super::{LayerArgs, MR, TILE};
 use crate::activation::softplus_slope as slope_of;
-use crate::activation::{Act, softplus};
+use crate::activation::{Act, EXP_TAIL, softplus};
 
 pub(super) fn layer(a: LayerArgs<'_>) {
     let LayerArgs {
@@ -51,7 +51,9 @@ pub(super) fn softmax_tile(buf: &mut [f32], rows: usize) {
         }
         let mut sum = 0.0;
         for j in 0..rows {
-            let e = libm::expf(buf[j * TILE + v] - m);
+            let z = buf[j * TILE + v] - m;
+            // Below the tail the weight would be subnormal (see `EXP_TAIL`): exactly zero.
+            let e = if z >= -EXP_TAIL { libm::expf(z) } else { 0.0 };
             buf[j * TILE + v] = e;
             sum += e;
         }

@@ -146,3 +146,35 @@ pub fn random_frames(n: usize, rng: &mut ChaCha8Rng) -> (Vec<Vec3>, Vec<glam::Ve
         .collect();
     (normals, tangents)
 }
+
+/// A closed ellipsoid filling the fixture box, as a UV sphere with a seam: `rings` latitude
+/// bands, `segments` longitudes, the seam column duplicated (as glTF exporters split UV seams)
+/// and one vertex per pole. Returns positions, outward normals and triangles.
+pub fn ellipsoid(rings: u32, segments: u32) -> (Vec<Vec3>, Vec<Vec3>, Vec<[u32; 3]>) {
+    let c = Vec3::from_array(std::array::from_fn(|k| 0.5 * (BBOX_MIN[k] + BBOX_MAX[k])));
+    let r = Vec3::from_array(std::array::from_fn(|k| 0.45 * (BBOX_MAX[k] - BBOX_MIN[k])));
+    let mut unit = vec![Vec3::Y];
+    for i in 1..rings {
+        let theta = std::f32::consts::PI * i as f32 / rings as f32;
+        for s in 0..=segments {
+            let phi = std::f32::consts::TAU * (s % segments) as f32 / segments as f32;
+            unit.push(Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()));
+        }
+    }
+    unit.push(-Vec3::Y);
+    let row = |i: u32, s: u32| 1 + (i - 1) * (segments + 1) + s;
+    let south = unit.len() as u32 - 1;
+    let mut tris = Vec::new();
+    for s in 0..segments {
+        tris.push([0, row(1, s + 1), row(1, s)]);
+        for i in 1..rings - 1 {
+            let (a, b, c2, d) = (row(i, s), row(i, s + 1), row(i + 1, s), row(i + 1, s + 1));
+            tris.push([a, b, c2]);
+            tris.push([b, d, c2]);
+        }
+        tris.push([south, row(rings - 1, s), row(rings - 1, s + 1)]);
+    }
+    let positions = unit.iter().map(|u| c + *u * r).collect();
+    let normals = unit.iter().map(|u| (*u / r).normalize()).collect();
+    (positions, normals, tris)
+}

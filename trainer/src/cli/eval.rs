@@ -2,16 +2,50 @@
 //! scores skinnings against the capture's ground-truth test meshes (M2S, S2M, Chamfer in
 //! centimetres). `--template` poses another mesh over the same canonical space instead of the
 //! capture's template (e.g. one written by `trainer resample`; SkinNet rows only).
+//! `--fast [N]` adds, after every `skf:FILE` row, the runtime's fast path at N nodes (and, per
+//! `--top-k K`, its top-k output), scored the same way, and prints their added error against
+//! the exact path (docs/fast-path.md).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clap::Args as ClapArgs;
+use clap::{Args as ClapArgs, ValueEnum};
 use skinfield_formats::capture::load_capture;
+use skinfield_runtime::fast::{FastOptions, Interpolation, NodeMetric};
+use skinfield_trainer::eval::fast::{FastEval, TopKFormat, VsExact, evaluate_fast};
 use skinfield_trainer::eval::{
-    DEFAULT_SAMPLES, EvalOptions, Skinning, evaluate_template, load_template, rows_to_json,
-    rows_to_table,
+    DEFAULT_SAMPLES, EvalOptions, EvalRow, Skinning, evaluate_template, load_template,
+    rows_to_json, rows_to_table,
 };
+
+/// `--fast-metric`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MetricArg {
+    /// Shortest paths along the mesh.
+    Mesh,
+    /// Straight-line distance (leaks between touching surfaces; for comparison).
+    Euclidean,
+}
+
+/// `--fast-interp`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum InterpArg {
+    /// Embedded-deformation-graph weights `(1 − d/d_{k+1})²`.
+    Graph,
+    /// Inverse squared distance.
+    Idw,
+}
+
+/// `--top-k-weights`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TopKWeightsArg {
+    /// unorm8.
+    Unorm8,
+    /// unorm16.
+    Unorm16,
+    /// f32.
+    F32,
+}
 
 /// Arguments of `trainer eval`.
 #[derive(ClapArgs, Debug)]
@@ -36,6 +70,62 @@ pub struct Args {
     /// Seed of the surface sampling.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Also score each `skf:FILE` with the runtime's fast path at N nodes (`--fast` alone: the
+    /// runtime's default N).
+    #[arg(long, value_name = "N")]
+    pub fast: Option<Option<usize>>,
+    /// Fast path: nodes each vertex interpolates from.
+    #[arg(long, default_value_t = FastOptions::DEFAULT.neighbours)]
+    pub fast_neighbours: usize,
+    /// Fast path: bind-pose joints kept exactly per vertex (0: interpolate everything).
+    #[arg(long, default_value_t = FastOptions::DEFAULT.base_influences)]
+    pub fast_base: usize,
+    /// Fast path: distance used to pick and weight the nodes.
+    #[arg(long, value_enum, default_value_t = MetricArg::Mesh)]
+    pub fast_metric: MetricArg,
+    /// Fast path: distance-to-weight rule.
+    #[arg(long, value_enum, default_value_t = InterpArg::Graph)]
+    pub fast_interp: InterpArg,
+    /// With `--fast`: also score the top-K output (K joints per vertex, quantised), repeatable.
+    #[arg(long = "top-k", value_name = "K", requires = "fast")]
+    pub top_k: Vec<usize>,
+    /// Weight format of the scored top-k output.
+    #[arg(long, value_enum, default_value_t = TopKWeightsArg::Unorm8)]
+    pub top_k_weights: TopKWeightsArg,
+}
+
+impl Args {
+    fn fast_eval(&self) -> Option<FastEval> {
+        let nodes = (*self.fast.as_ref()?).unwrap_or(FastOptions::DEFAULT.nodes);
+        Some(FastEval {
+            options: FastOptions {
+                nodes,
+                neighbours: self.fast_neighbours,
+                base_influences: self.fast_base,
+                metric: match self.fast_metric {
+                    MetricArg::Mesh => NodeMetric::AlongMesh,
+                    MetricArg::Euclidean => NodeMetric::Euclidean,
+                },
+                interpolation: match self.fast_interp {
+                    InterpArg::Graph => Interpolation::EmbeddedGraph,
+                    InterpArg::Idw => Interpolation::InverseDistance,
+                },
+            },
+            top_k: self.top_k.clone(),
+            format: match self.top_k_weights {
+                TopKWeightsArg::Unorm8 => TopKFormat::Unorm8,
+                TopKWeightsArg::Unorm16 => TopKFormat::Unorm16,
+                TopKWeightsArg::F32 => TopKFormat::F32,
+            },
+        })
+    }
+}
+
+#[derive(serde::Serialize)]
+struct JsonOut<'a> {
+    rows: &'a [EvalRow],
+    #[serde(skip_serializing_if = "<[VsExact]>::is_empty")]
+    fast_vs_exact: &'a [VsExact],
 }
 
 /// Runs `trainer eval`.
@@ -50,16 +140,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(path) => load_template(path)?,
         None => capture.template.clone(),
     };
+    let fast = args.fast_eval();
     let mut rows = Vec::with_capacity(args.weights.len());
+    let mut vs_exact = Vec::new();
     for skinning in &args.weights {
         let row = evaluate_template(&capture, &template, skinning, &options)
             .with_context(|| format!("evaluating `{}`", skinning.method_name()))?;
         rows.push(row);
+        if let (Some(fast), Skinning::Skf(path)) = (&fast, skinning) {
+            let (r, e) = evaluate_fast(&capture, &template, path, fast, &options)
+                .with_context(|| format!("evaluating the fast path of {}", path.display()))?;
+            rows.extend(r);
+            vs_exact.extend(e);
+        }
     }
     if args.json {
-        print!("{}", rows_to_json(&rows));
+        if vs_exact.is_empty() {
+            print!("{}", rows_to_json(&rows));
+        } else {
+            let out = JsonOut {
+                rows: &rows,
+                fast_vs_exact: &vs_exact,
+            };
+            println!("{}", serde_json::to_string_pretty(&out)?);
+        }
     } else {
         print!("{}", rows_to_table(&rows));
+        if !vs_exact.is_empty() {
+            println!(
+                "\nfast path vs exact (same frames): vertex distance mean / max (cm), weights L1"
+            );
+            for e in &vs_exact {
+                println!(
+                    "{:<32} {:>9.5} {:>9.4} {:>9.5}   (N = {}, bind {:.0} ms)",
+                    e.method, e.mean_cm, e.max_cm, e.weights_l1, e.nodes, e.bind_ms
+                );
+            }
+        }
     }
     Ok(())
 }

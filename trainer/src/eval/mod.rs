@@ -33,10 +33,13 @@
 //! | `oracle-dqs` | `oracle-dqs` | the same | DQS |
 //! | `bound-static` | `bound-static` | the best static weights for the training frames' ground truth ([`bounds`]) | LBS |
 //! | `bound-pose` | `bound-pose` | the best per-frame weights within the candidate joints ([`bounds`]) | LBS |
+//!
+//! `trainer eval --fast [N]` adds the runtime's fast path of every `skf:FILE` row ([`fast`]).
 
 pub mod bounds;
 pub mod bvh;
 pub mod distance;
+pub mod fast;
 pub mod posing;
 pub mod static_weights;
 pub mod surface;
@@ -372,7 +375,7 @@ impl PreparedSkinning {
 
 /// Reads a `.skf` and checks that its skeleton is the capture's (same joint names, same order:
 /// SkinNet's outputs and pose features are per joint in file order).
-fn load_skinnet(path: &std::path::Path, capture: &Capture) -> Result<SkinNetModel, EvalError> {
+pub(crate) fn load_skinnet(path: &std::path::Path, capture: &Capture) -> Result<SkinNetModel, EvalError> {
     let bytes = read_skf_file(path)?;
     let model = SkinNetModel::from_skf(&bytes).map_err(|e| EvalError::Skf {
         path: path.to_owned(),
