@@ -33,7 +33,8 @@ struct Params {
     term_skip_width: u32,
     // Softplus sharpness β.
     beta: f32,
-    _pad0: u32,
+    // Candidate-list slots per vertex in `candidates` (0: every joint is a candidate).
+    candidate_k: u32,
     _pad1: u32,
     _pad2: u32,
     layers: array<Layer, 9>,
@@ -66,6 +67,9 @@ struct Vertex {
 @group(0) @binding(10) var<storage, read_write> skin_weights: array<f32>;
 @group(0) @binding(11) var<storage, read> rest: array<Vertex>;
 @group(0) @binding(12) var<storage, read_write> skinned: array<Vertex>;
+// Candidate joints (a `.skf` with `CAND`): `candidate_k` joint indices per vertex, padded with
+// 0xFFFF; the softmax ranges over them only. One unused word without candidates.
+@group(0) @binding(20) var<storage, read> candidates: array<u32>;
 
 const THREADS: u32 = 64u;
 

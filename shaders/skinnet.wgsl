@@ -105,23 +105,46 @@ fn skinnet_weights(
         workgroupBarrier();
     }
 
-    // Softmax over the joints, one thread per vertex.
+    // Softmax over the joints (the vertex's candidates only, when the model has them), one
+    // thread per vertex. Non-candidates weigh exactly zero, as in the CPU path.
     let j_count = params.joint_count;
+    let k = params.candidate_k;
     let v = first_vertex + lid;
     if lid < TILE && v < params.vertex_count {
         let q = lid / 4u;
         let c = lid % 4u;
-        var m = act[q][c];
-        for (var j = 1u; j < j_count; j++) {
-            m = max(m, act[j * QUADS + q][c]);
+        var m = -3.0e38;
+        for (var j = 0u; j < j_count; j++) {
+            if is_candidate(v, j, k) {
+                m = max(m, act[j * QUADS + q][c]);
+            }
         }
         var sum = 0.0;
         for (var j = 0u; j < j_count; j++) {
-            sum += exp(act[j * QUADS + q][c] - m);
+            if is_candidate(v, j, k) {
+                sum += exp(act[j * QUADS + q][c] - m);
+            }
         }
         let inv = 1.0 / sum;
         for (var j = 0u; j < j_count; j++) {
-            skin_weights[v * j_count + j] = exp(act[j * QUADS + q][c] - m) * inv;
+            var w = 0.0;
+            if is_candidate(v, j, k) {
+                w = exp(act[j * QUADS + q][c] - m) * inv;
+            }
+            skin_weights[v * j_count + j] = w;
         }
     }
+}
+
+// Whether joint `j` is among vertex `v`'s `k` candidates (always, with `k` = 0).
+fn is_candidate(v: u32, j: u32, k: u32) -> bool {
+    if k == 0u {
+        return true;
+    }
+    for (var s = 0u; s < k; s++) {
+        if candidates[v * k + s] == j {
+            return true;
+        }
+    }
+    return false;
 }

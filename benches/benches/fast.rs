@@ -281,7 +281,10 @@ fn table() {
             ex / fa
         );
     }
-    println!("\n| nodes N | fast frame ms ({} vertices) |", mesh(SWEEP_SIZE).0.len());
+    println!(
+        "\n| nodes N | fast frame ms ({} vertices) |",
+        mesh(SWEEP_SIZE).0.len()
+    );
     println!("|---|---|");
     for nodes in SWEEP_NODES {
         if let Some(t) = mean_s(&[

@@ -9,8 +9,7 @@ use skinfield_formats::{Pose, StaticSkin};
 use skinfield_runtime::fast::{Interpolation, MAX_INFLUENCES, NodeMetric, strongest_influences};
 use skinfield_runtime::{
     BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Influence, Method,
-    RuntimeError, Scratch, SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob,
-    TopKWeights,
+    RuntimeError, Scratch, SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob, TopKWeights,
 };
 
 struct Fixture {
@@ -143,7 +142,10 @@ fn pose_static(f: &Fixture, skin: &StaticSkin, method: Method) -> Vec<Vec3> {
 }
 
 fn max_dist(a: &[Vec3], b: &[Vec3]) -> f32 {
-    a.iter().zip(b).map(|(a, b)| a.distance(*b)).fold(0.0, f32::max)
+    a.iter()
+        .zip(b)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f32::max)
 }
 
 #[test]
@@ -245,7 +247,12 @@ fn interpolated_weights_follow_the_documented_formula_and_lbs_is_their_exact_ble
             .positions
             .iter()
             .zip(fast.w.chunks_exact(j))
-            .map(|(p, w)| w.iter().zip(mats).map(|(w, m)| m.transform_point3(*p) * *w).sum())
+            .map(|(p, w)| {
+                w.iter()
+                    .zip(mats)
+                    .map(|(w, m)| m.transform_point3(*p) * *w)
+                    .sum()
+            })
             .collect();
         assert!(max_dist(&fast.p, &want) < 1e-5, "{options:?}");
     }
@@ -290,15 +297,12 @@ fn dqs_and_top_k_use_the_strongest_joints() {
         let mut u16w = vec![0u16; n * k];
         let mut f32w = vec![0.0f32; n * k];
         for (idx, wts) in [
+            (TopKIndices::U8(&mut i8), TopKWeights::Unorm8(&mut u8w)),
+            (TopKIndices::U16(&mut i16), TopKWeights::Unorm16(&mut u16w)),
             (
-                TopKIndices::U8(&mut i8),
-                TopKWeights::Unorm8(&mut u8w),
+                TopKIndices::U16(&mut vec![0; n * k]),
+                TopKWeights::F32(&mut f32w),
             ),
-            (
-                TopKIndices::U16(&mut i16),
-                TopKWeights::Unorm16(&mut u16w),
-            ),
-            (TopKIndices::U16(&mut vec![0; n * k]), TopKWeights::F32(&mut f32w)),
         ] {
             TopKJob {
                 mesh: &mesh,
@@ -315,10 +319,28 @@ fn dqs_and_top_k_use_the_strongest_joints() {
         for v in 0..n {
             let r = v * k..(v + 1) * k;
             let want_j: Vec<u32> = joints[r.clone()].to_vec();
-            assert_eq!(i8[r.clone()].iter().map(|&x| u32::from(x)).collect::<Vec<_>>(), want_j);
-            assert_eq!(i16[r.clone()].iter().map(|&x| u32::from(x)).collect::<Vec<_>>(), want_j);
-            assert_eq!(u8w[r.clone()].iter().map(|&x| u32::from(x)).sum::<u32>(), 255);
-            assert_eq!(u16w[r.clone()].iter().map(|&x| u32::from(x)).sum::<u32>(), 65535);
+            assert_eq!(
+                i8[r.clone()]
+                    .iter()
+                    .map(|&x| u32::from(x))
+                    .collect::<Vec<_>>(),
+                want_j
+            );
+            assert_eq!(
+                i16[r.clone()]
+                    .iter()
+                    .map(|&x| u32::from(x))
+                    .collect::<Vec<_>>(),
+                want_j
+            );
+            assert_eq!(
+                u8w[r.clone()].iter().map(|&x| u32::from(x)).sum::<u32>(),
+                255
+            );
+            assert_eq!(
+                u16w[r.clone()].iter().map(|&x| u32::from(x)).sum::<u32>(),
+                65535
+            );
             assert_eq!(f32w[r.clone()].iter().sum::<f32>(), 1.0);
             assert_eq!(f32w[r.clone()].iter().rev().sum::<f32>(), 1.0);
             for (i, &w) in weights[r.clone()].iter().enumerate() {
@@ -424,7 +446,10 @@ fn mesh_distances_do_not_leak_between_touching_sheets() {
     };
     assert_eq!(leaks(NodeMetric::AlongMesh), (0.0, 0));
     let (euclid, _) = leaks(NodeMetric::Euclidean);
-    assert!(euclid > 0.1 * positions.len() as f32, "straight lines leak: {euclid}");
+    assert!(
+        euclid > 0.1 * positions.len() as f32,
+        "straight lines leak: {euclid}"
+    );
 }
 
 #[test]
@@ -453,7 +478,11 @@ fn seam_copies_get_the_same_interpolation_and_components_without_nodes_fall_back
     let mut p = f.positions.clone();
     let off = p.len() as u32;
     // Inside the ellipsoid, so the first (farthest-from-centroid) node lands on the ellipsoid.
-    p.extend([Vec3::new(0.0, 0.9, 0.0), Vec3::new(0.02, 0.9, 0.0), Vec3::new(0.0, 0.92, 0.0)]);
+    p.extend([
+        Vec3::new(0.0, 0.9, 0.0),
+        Vec3::new(0.02, 0.9, 0.0),
+        Vec3::new(0.0, 0.92, 0.0),
+    ]);
     let mut t = f.triangles.clone();
     t.push([off, off + 1, off + 2]);
     let mesh = FastMesh::bind(
@@ -615,11 +644,23 @@ fn every_invalid_configuration_is_refused_by_name() {
     reposed.set_pose(&f.model, &f.pose).unwrap();
     let short_normals = vec![Vec3::Y; n - 1];
     let cases: [(&str, RuntimeError); 10] = [
-        ("nodes of another mesh", RuntimeError::Mismatch { field: "nodes" }),
-        ("frame of another model", RuntimeError::Mismatch { field: "frame" }),
+        (
+            "nodes of another mesh",
+            RuntimeError::Mismatch { field: "nodes" },
+        ),
+        (
+            "frame of another model",
+            RuntimeError::Mismatch { field: "frame" },
+        ),
         ("frame without pose", RuntimeError::NoPose),
-        ("nodes of an older pose", RuntimeError::Stale { field: "nodes" }),
-        ("nodes never updated", RuntimeError::Stale { field: "nodes" }),
+        (
+            "nodes of an older pose",
+            RuntimeError::Stale { field: "nodes" },
+        ),
+        (
+            "nodes never updated",
+            RuntimeError::Stale { field: "nodes" },
+        ),
         (
             "range past the end",
             RuntimeError::Range {
@@ -664,11 +705,7 @@ fn every_invalid_configuration_is_refused_by_name() {
     ];
     let never = FastFrame::new(&mesh);
     for (k, (what, want)) in cases.into_iter().enumerate() {
-        let (mut p, mut nn, mut w) = (
-            vec![Vec3::ZERO; n],
-            vec![Vec3::ZERO; n],
-            vec![0.0; n * 6],
-        );
+        let (mut p, mut nn, mut w) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n], vec![0.0; n * 6]);
         let mut job = FastSkinJob {
             mesh: &mesh,
             frame: &f.frame,
@@ -738,11 +775,21 @@ fn every_invalid_configuration_is_refused_by_name() {
         .validate()
     };
     assert_eq!(
-        top(4, TopKIndices::U8(&mut [0; 8]), TopKWeights::F32(&mut [0.0; 8]), 0),
+        top(
+            4,
+            TopKIndices::U8(&mut [0; 8]),
+            TopKWeights::F32(&mut [0.0; 8]),
+            0
+        ),
         Ok(())
     );
     assert_eq!(
-        top(4, TopKIndices::U8(&mut [0; 9]), TopKWeights::F32(&mut [0.0; 9]), 0),
+        top(
+            4,
+            TopKIndices::U8(&mut [0; 9]),
+            TopKWeights::F32(&mut [0.0; 9]),
+            0
+        ),
         Err(RuntimeError::BufferLength {
             field: "out_indices",
             len: 9,
@@ -750,7 +797,12 @@ fn every_invalid_configuration_is_refused_by_name() {
         })
     );
     assert_eq!(
-        top(4, TopKIndices::U16(&mut [0; 8]), TopKWeights::Unorm8(&mut [0; 4]), 0),
+        top(
+            4,
+            TopKIndices::U16(&mut [0; 8]),
+            TopKWeights::Unorm8(&mut [0; 4]),
+            0
+        ),
         Err(RuntimeError::BufferLength {
             field: "out_weights",
             len: 4,
@@ -758,7 +810,12 @@ fn every_invalid_configuration_is_refused_by_name() {
         })
     );
     assert_eq!(
-        top(0, TopKIndices::U16(&mut [0; 8]), TopKWeights::Unorm16(&mut [0; 8]), 0),
+        top(
+            0,
+            TopKIndices::U16(&mut [0; 8]),
+            TopKWeights::Unorm16(&mut [0; 8]),
+            0
+        ),
         Err(RuntimeError::Setting {
             field: "influences",
             value: 0,
@@ -767,7 +824,12 @@ fn every_invalid_configuration_is_refused_by_name() {
         })
     );
     assert_eq!(
-        top(4, TopKIndices::U16(&mut [0; 8]), TopKWeights::Unorm16(&mut [0; 8]), n - 1),
+        top(
+            4,
+            TopKIndices::U16(&mut [0; 8]),
+            TopKWeights::Unorm16(&mut [0; 8]),
+            n - 1
+        ),
         Err(RuntimeError::Range {
             first: n - 1,
             count: 2,
@@ -783,7 +845,10 @@ fn every_invalid_configuration_is_refused_by_name() {
         out_indices: TopKIndices::U8(&mut [0; 4]),
         out_weights: TopKWeights::Unorm8(&mut [0; 4]),
     };
-    assert_eq!(stale.validate(), Err(RuntimeError::Stale { field: "nodes" }));
+    assert_eq!(
+        stale.validate(),
+        Err(RuntimeError::Stale { field: "nodes" })
+    );
     // u8 indices cannot name joint 256 and beyond.
     let mut wide = common::no_skip_config();
     wide.joint_count = 300;
@@ -795,7 +860,12 @@ fn every_invalid_configuration_is_refused_by_name() {
     wide_frame.set_pose(&wide_model, &wide_pose).unwrap();
     let mut wide_nodes = FastFrame::new(&wide_mesh);
     wide_nodes
-        .update(&wide_model, &wide_mesh, &wide_frame, &mut Scratch::new(&wide_model))
+        .update(
+            &wide_model,
+            &wide_mesh,
+            &wide_frame,
+            &mut Scratch::new(&wide_model),
+        )
         .unwrap();
     let job = TopKJob {
         mesh: &wide_mesh,

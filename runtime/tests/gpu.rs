@@ -7,7 +7,7 @@
 use glam::{DMat3, DMat4, DQuat, DVec3, Mat4, Quat, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
+use skinfield_formats::skf::{Candidates, ModelConfig, Net, SkfModel, SkfView};
 use skinfield_formats::{Pose, Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
 use skinfield_runtime::gpu::{
     GpuError, GpuSkinner, SkinnedVertex, Skinning, WeightFormat, headless_device,
@@ -104,6 +104,12 @@ fn skeleton_and_pose(joints: usize, rng: &mut ChaCha8Rng) -> (Skeleton, Pose) {
 /// A `.skf` with random SkinNet weights of the shapes `config` implies (He-like scale so the
 /// activations stay O(1) through the layers).
 fn random_model(config: ModelConfig, seed: u64) -> (Vec<u8>, Skeleton, Pose) {
+    let (model, skeleton, pose) = random_skf_model(config, seed);
+    (model.to_bytes().unwrap(), skeleton, pose)
+}
+
+/// [`random_model`] before serialisation.
+fn random_skf_model(config: ModelConfig, seed: u64) -> (SkfModel, Skeleton, Pose) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (skeleton, pose) = skeleton_and_pose(config.joint_count as usize, &mut rng);
     let mut model = SkfModel {
@@ -121,7 +127,7 @@ fn random_model(config: ModelConfig, seed: u64) -> (Vec<u8>, Skeleton, Pose) {
         let b = (0..out).map(|_| rng.random_range(-0.3..0.3)).collect();
         model.push_layer(Net::Skin, l, w, out, inp, b);
     }
-    (model.to_bytes().unwrap(), skeleton, pose)
+    (model, skeleton, pose)
 }
 
 /// Positions inside (and slightly outside) the configuration's box, random unit normals.
@@ -408,6 +414,100 @@ fn small_model_matches_cpu_reference_at_tile_boundaries() {
         check_model((&device, &queue), &skinner, small_config(), &[65], None, 1);
     } else {
         eprintln!("adapter lacks SHADER_F16_IN_F32: unpack2x16float variant not run");
+    }
+}
+
+/// A model with candidate joints (`CAND`): the GPU's masked softmax equals the CPU path's,
+/// weight for weight and vertex for vertex, and every non-candidate weighs exactly zero.
+#[test]
+fn candidate_joints_mask_the_gpu_softmax_like_the_cpu_path() {
+    let Some((device, queue, _)) = device() else {
+        return;
+    };
+    let skinner = GpuSkinner::new(&device).unwrap();
+    let config = small_config();
+    let joints = config.joint_count as usize;
+    let (mut model, skeleton, pose) = random_skf_model(config, 7);
+    // 40 random anchors in the box, each with 1–3 random ascending candidates.
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let (positions, _) = random_mesh(&config, 40, 9);
+    let k = 3;
+    let lists: Vec<Vec<u16>> = positions
+        .iter()
+        .map(|_| {
+            let mut l: Vec<u16> = (0..joints as u16)
+                .filter(|_| rng.random_bool(0.4))
+                .collect();
+            l.truncate(k);
+            if l.is_empty() {
+                l.push(rng.random_range(0..joints as u16));
+            }
+            l
+        })
+        .collect();
+    model.candidates = Some(Candidates {
+        positions: positions.iter().map(|p| p.to_array()).collect(),
+        lists: lists.clone(),
+        k,
+    });
+    let bytes = model.to_bytes().unwrap();
+    let view = SkfView::parse(&bytes).unwrap();
+    let gpu_model = skinner.bind_model(&device, &view).unwrap();
+    let cpu_net = SkinNet::from_view(&view).unwrap();
+    let mut frame = FrameState::new(&cpu_net);
+    frame.set_pose(&cpu_net, &pose).unwrap();
+    let mut features = vec![0.0; pose_feature_count(skeleton.len())];
+    pose_features(&skeleton, &pose, UpAxis::Y, &mut features).unwrap();
+    let mut mats = vec![Mat4::IDENTITY; skeleton.len()];
+    skeleton.skinning_matrices(&pose, &mut mats).unwrap();
+    // The mesh: the anchors themselves (each takes its own list) and 25 other points.
+    let (mut mesh_positions, mut normals) = random_mesh(&config, 25, 10);
+    mesh_positions.extend(&positions);
+    normals.extend(std::iter::repeat_n(Vec3::Y, positions.len()));
+    let n = mesh_positions.len();
+    let mesh = skinner
+        .bind_mesh(&device, &queue, &gpu_model, &mesh_positions, &normals)
+        .unwrap();
+    skinner
+        .skin(&device, &queue, &mesh, &mats, &features, Skinning::Linear)
+        .unwrap();
+    let weights = mesh.read_weights(&device, &queue).unwrap();
+    let out: Vec<SkinnedVertex> = mesh.read_vertices(&device, &queue).unwrap();
+    let cpu_mesh = BoundMesh::bind(&cpu_net, &mesh_positions).unwrap();
+    let (mut cpu_p, mut cpu_w) = (vec![Vec3::ZERO; n], vec![0.0; n * joints]);
+    SkinJob {
+        model: &cpu_net,
+        mesh: &cpu_mesh,
+        frame: &frame,
+        method: Method::Lbs,
+        first_vertex: 0,
+        rest_normals: None,
+        rest_tangents: None,
+        out_positions: &mut cpu_p,
+        out_normals: None,
+        out_tangents: None,
+        out_weights: Some(&mut cpu_w),
+    }
+    .run(&mut Scratch::new(&cpu_net))
+    .unwrap();
+    let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+    close("masked weights vs CPU path", 0, &weights, &widen(&cpu_w));
+    for v in 0..n {
+        close(
+            "masked LBS position vs CPU path",
+            v,
+            &out[v].position[..3],
+            &widen(&cpu_p[v].to_array()),
+        );
+    }
+    for (a, list) in lists.iter().enumerate() {
+        let row = &weights[(25 + a) * joints..(26 + a) * joints];
+        for (j, &w) in row.iter().enumerate() {
+            if !list.contains(&(j as u16)) {
+                assert_eq!(w, 0.0, "anchor {a}, joint {j} is not a candidate");
+            }
+        }
+        assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-5);
     }
 }
 

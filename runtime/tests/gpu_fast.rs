@@ -8,8 +8,8 @@ mod common;
 use glam::{Mat4, Vec3};
 use skinfield_formats::skf::SkfView;
 use skinfield_runtime::gpu::{
-    FastOutputs, GpuError, GpuFastOptions, GpuSkinner, Skinning, TopKIndexFormat,
-    TopKWeightFormat, headless_device,
+    FastOutputs, GpuError, GpuFastOptions, GpuSkinner, Skinning, TopKIndexFormat, TopKWeightFormat,
+    headless_device,
 };
 use skinfield_runtime::{
     FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Scratch, SkinNetModel,
@@ -197,7 +197,11 @@ fn check(bytes: &[u8], options: &FastOptions, seed: u64) {
                 65535.0,
             ),
             TopKWeightFormat::F32 => (
-                gi_to(&gw, |b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])), 4),
+                gi_to(
+                    &gw,
+                    |b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                    4,
+                ),
                 w32.iter().map(|&x| f64::from(x)).collect(),
                 1.0,
             ),

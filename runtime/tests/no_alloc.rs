@@ -9,8 +9,8 @@ use std::cell::Cell;
 use glam::{Vec3, Vec4};
 use skinfield_formats::StaticSkin;
 use skinfield_runtime::{
-    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Palette,
-    Scratch, SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob, TopKWeights, WeightsJob,
+    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Palette, Scratch,
+    SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob, TopKWeights, WeightsJob,
 };
 
 struct Counting;

@@ -74,7 +74,8 @@ impl MeshGraph {
         let lengths = edges
             .iter()
             .map(|&(a, b)| {
-                positions[first[a as usize] as usize].distance(positions[first[b as usize] as usize])
+                positions[first[a as usize] as usize]
+                    .distance(positions[first[b as usize] as usize])
             })
             .collect();
         Self {
@@ -292,7 +293,10 @@ mod tests {
         let (p, t) = strip(8);
         let g = MeshGraph::new(&p, &t);
         let nodes = farthest_point_nodes(&g, 3, g.weld[0]);
-        let xs: Vec<f32> = nodes.iter().map(|&w| p[g.first[w as usize] as usize].x).collect();
+        let xs: Vec<f32> = nodes
+            .iter()
+            .map(|&w| p[g.first[w as usize] as usize].x)
+            .collect();
         // Start at x = 0, then the far end, then the middle.
         assert_eq!(xs[0], 0.0);
         assert_eq!(xs[1], 8.0);
@@ -324,7 +328,10 @@ mod tests {
             }
         }
         let mut out = [(0.0, 0); 2];
-        let nodes_p: Vec<Vec3> = nodes.iter().map(|&w| p[g.first[w as usize] as usize]).collect();
+        let nodes_p: Vec<Vec3> = nodes
+            .iter()
+            .map(|&w| p[g.first[w as usize] as usize])
+            .collect();
         nearest_nodes_in_space(&nodes_p, Vec3::new(2.2, 0.0, 0.0), &mut out);
         assert_eq!(out.map(|e| e.1), [1, 2].map(|i: u32| i));
     }

@@ -13,8 +13,8 @@ use super::{Influence, MAX_INFLUENCES};
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, WeightsJob, check_attr};
-use crate::model::SkinNet;
 use crate::kernels::blend;
+use crate::model::SkinNet;
 use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
 
 /// Residual weights smaller than this are exactly zero (2⁻¹⁰⁰ ≈ 7.9e-31).
@@ -273,7 +273,12 @@ impl FastSkinJob<'_> {
                     // residual matrices give Σ_j w_vj M_j without forming w_v.
                     let mut m = Mat4::ZERO;
                     let base = mesh.base_of(v).iter();
-                    blend(kernel, &mut m, mats, base.map(|b| (b.index as usize, b.weight)));
+                    blend(
+                        kernel,
+                        &mut m,
+                        mats,
+                        base.map(|b| (b.index as usize, b.weight)),
+                    );
                     let interp = mesh.interp_of(v).iter();
                     blend(
                         kernel,

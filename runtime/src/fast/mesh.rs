@@ -7,7 +7,9 @@ use core::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Vec3;
 
-use super::graph::{MeshGraph, farthest_point_nodes, nearest_nodes_along_mesh, nearest_nodes_in_space};
+use super::graph::{
+    MeshGraph, farthest_point_nodes, nearest_nodes_along_mesh, nearest_nodes_in_space,
+};
 use super::topk::strongest_influences;
 use super::{FastOptions, Influence, Interpolation, MAX_INFLUENCES, NodeMetric};
 use crate::bind::{BoundMesh, MAX_BIND_VERTICES};
@@ -196,7 +198,12 @@ impl FastMesh {
         let j = model.joint_count();
         setting("nodes", options.nodes, 1, MAX_BIND_VERTICES)?;
         setting("neighbours", options.neighbours, 1, MAX_INFLUENCES)?;
-        setting("base_influences", options.base_influences, 0, MAX_INFLUENCES)?;
+        setting(
+            "base_influences",
+            options.base_influences,
+            0,
+            MAX_INFLUENCES,
+        )?;
         // More base joints than the model has would only repeat zeros.
         let options = &FastOptions {
             base_influences: options.base_influences.min(j),

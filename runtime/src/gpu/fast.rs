@@ -351,7 +351,11 @@ impl GpuSkinner {
         outputs: FastOutputs,
     ) -> Result<(), GpuError> {
         if outputs.top_k && mesh.top_bytes.0 == 0 {
-            return Err(setting("top_k output", 0, "a mesh bound with a top_k layout"));
+            return Err(setting(
+                "top_k output",
+                0,
+                "a mesh bound with a top_k layout",
+            ));
         }
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("skinfield fast frame"),

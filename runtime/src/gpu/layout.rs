@@ -57,9 +57,9 @@ pub struct GpuParams {
     pub term_skip_width: u32,
     /// Softplus β.
     pub beta: f32,
+    /// Candidate-list slots per vertex in the `candidates` buffer (0: no candidate mask).
+    pub candidate_k: u32,
     /// Padding to the 16-byte alignment of `layers`.
-    pub _pad0: u32,
-    /// Padding.
     pub _pad1: u32,
     /// Padding.
     pub _pad2: u32,
@@ -303,7 +303,7 @@ mod tests {
                 ("term0_width", offset_of!(GpuParams, term0_width)),
                 ("term_skip_width", offset_of!(GpuParams, term_skip_width)),
                 ("beta", offset_of!(GpuParams, beta)),
-                ("_pad0", offset_of!(GpuParams, _pad0)),
+                ("candidate_k", offset_of!(GpuParams, candidate_k)),
                 ("_pad1", offset_of!(GpuParams, _pad1)),
                 ("_pad2", offset_of!(GpuParams, _pad2)),
                 ("layers", offset_of!(GpuParams, layers)),

@@ -4,6 +4,7 @@ use std::sync::mpsc;
 
 use glam::{Mat4, Vec3};
 use half::f16;
+use skinfield_formats::skf::candidates::NO_JOINT;
 use skinfield_formats::skf::{Dtype, ModelConfig, Net, SkfView, TensorView};
 use wgpu::util::DeviceExt;
 
@@ -12,6 +13,7 @@ use super::layout::{
     GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
     WORKGROUP_THREADS, WeightFormat, entry, shader_source,
 };
+use crate::candidates::AnchorSet;
 
 /// Which skinning the frame uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,6 +48,8 @@ pub struct GpuModel {
     params: GpuParams,
     weights: wgpu::Buffer,
     biases: wgpu::Buffer,
+    /// The model's candidate joints (`CAND`), turned into per-vertex lists at bind time.
+    anchors: Option<AnchorSet>,
 }
 
 /// A mesh bound to a model: rest vertices, precomputed position terms, the per-frame inputs and
@@ -320,15 +324,7 @@ impl GpuSkinner {
         format: Option<WeightFormat>,
     ) -> Result<GpuModel, GpuError> {
         let config = *view.config();
-        if let Some(c) = view.candidates() {
-            // The WGSL softmax has no candidate mask yet: refuse rather than skin every vertex
-            // with joints it was never trained on.
-            return Err(GpuError::Unsupported {
-                what: "candidate joints per anchor (CAND)",
-                value: c.k(),
-                max: 0,
-            });
-        }
+        let anchors = view.candidates().map(|c| AnchorSet::from_view(&c));
         let hidden = config.hidden_widths();
         let n = hidden.len();
         for &w in hidden {
@@ -413,6 +409,7 @@ impl GpuSkinner {
             term0_width: hidden[0],
             term_skip_width: if skip > 0 { hidden[skip] } else { 0 },
             beta: config.softplus_beta,
+            candidate_k: anchors.as_ref().map_or(0, |a| a.k() as u32),
             layers,
             ..GpuParams::default()
         };
@@ -426,6 +423,7 @@ impl GpuSkinner {
             params,
             weights: self.storage_init(device, "skinnet weights", weight_bytes)?,
             biases: self.storage_init(device, "skinnet biases", bytemuck::cast_slice(&biases))?,
+            anchors,
         })
     }
 
@@ -496,6 +494,14 @@ impl GpuSkinner {
         let encoding_buf =
             self.storage_init(device, "position encoding", bytemuck::cast_slice(&encoding))?;
         let rest_buf = self.storage_init(device, "rest vertices", bytemuck::cast_slice(&rest))?;
+        // Each vertex takes its nearest anchor's list (the CPU path's rule); one unused word
+        // without candidates, since the kernel's layout always has the binding.
+        let lists: Vec<u32> = match &model.anchors {
+            Some(a) => a.lists_for(positions).into_iter().map(u32::from).collect(),
+            None => vec![u32::from(NO_JOINT)],
+        };
+        let candidates =
+            self.storage_init(device, "candidate joints", bytemuck::cast_slice(&lists))?;
         let term0 = self.storage(device, "layer-0 position terms", v * h0 * 4, none)?;
         let term_skip = self.storage(device, "skip-layer position terms", v * hs * 4, none)?;
         let features = self.storage(device, "pose features", pose_width as u64 * 4, copy_dst)?;
@@ -511,7 +517,7 @@ impl GpuSkinner {
             wgpu::BufferUsages::VERTEX | copy_src,
         )?;
 
-        let buffers: [(u32, &wgpu::Buffer); 13] = [
+        let buffers: [(u32, &wgpu::Buffer); 14] = [
             (0, &params_buf),
             (1, &model.weights),
             (2, &model.biases),
@@ -525,13 +531,15 @@ impl GpuSkinner {
             (10, &skin_weights),
             (11, &rest_buf),
             (12, &output),
+            (20, &candidates),
         ];
         let group = |pipeline: &wgpu::ComputePipeline, bindings: &[u32]| {
             let entries: Vec<wgpu::BindGroupEntry<'_>> = bindings
                 .iter()
-                .map(|&b| wgpu::BindGroupEntry {
+                .filter_map(|&b| buffers.iter().find(|(n, _)| *n == b))
+                .map(|&(b, buffer)| wgpu::BindGroupEntry {
                     binding: b,
-                    resource: buffers[b as usize].1.as_entire_binding(),
+                    resource: buffer.as_entire_binding(),
                 })
                 .collect();
             device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -550,7 +558,7 @@ impl GpuSkinner {
             term_count,
             bind_pose_terms: group(&pipes.pose_terms, &[0, 1, 2, 6, 8]),
             bind_joint_dqs: group(&self.joint_dqs, &[0, 7, 9]),
-            bind_skinnet: group(&pipes.skinnet, &[0, 1, 2, 4, 5, 8, 10]),
+            bind_skinnet: group(&pipes.skinnet, &[0, 1, 2, 4, 5, 8, 10, 20]),
             bind_lbs: group(&self.lbs, &[0, 7, 10, 11, 12]),
             bind_dqs: group(&self.dqs, &[0, 9, 10, 11, 12]),
             features,

@@ -15,9 +15,9 @@ use crate::activation::Act;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
-mod blend;
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod blend;
 mod scalar;
 
 pub(crate) use blend::blend;

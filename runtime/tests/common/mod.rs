@@ -158,7 +158,11 @@ pub fn ellipsoid(rings: u32, segments: u32) -> (Vec<Vec3>, Vec<Vec3>, Vec<[u32; 
         let theta = std::f32::consts::PI * i as f32 / rings as f32;
         for s in 0..=segments {
             let phi = std::f32::consts::TAU * (s % segments) as f32 / segments as f32;
-            unit.push(Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()));
+            unit.push(Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            ));
         }
     }
     unit.push(-Vec3::Y);

@@ -11,8 +11,8 @@ use glam::Vec3;
 use skinfield_formats::capture::Capture;
 use skinfield_formats::{StaticSkin, Template};
 use skinfield_runtime::{
-    FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Scratch,
-    SkinNetModel, TopKIndices, TopKJob, TopKWeights,
+    FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Scratch, SkinNetModel,
+    TopKIndices, TopKJob, TopKWeights,
 };
 
 use super::posing::{Blend, pose_dense_lbs, pose_static};
@@ -126,7 +126,11 @@ pub fn evaluate_fast(
                 max = max.max(d);
             }
             let j = model.joint_count();
-            for (a, b) in fast.weights.chunks_exact(j).zip(exact.weights.chunks_exact(j)) {
+            for (a, b) in fast
+                .weights
+                .chunks_exact(j)
+                .zip(exact.weights.chunks_exact(j))
+            {
                 l1 += a
                     .iter()
                     .zip(b)
@@ -218,25 +222,45 @@ fn fast_pose(
     let dequantised: Vec<f32> = match format {
         TopKFormat::Unorm8 => {
             let mut q = vec![0u8; n * k];
-            run_top_k(mesh, &frame, &nodes, k, &mut indices, TopKWeights::Unorm8(&mut q))?;
+            run_top_k(
+                mesh,
+                &frame,
+                &nodes,
+                k,
+                &mut indices,
+                TopKWeights::Unorm8(&mut q),
+            )?;
             q.iter().map(|&x| f32::from(x) / 255.0).collect()
         }
         TopKFormat::Unorm16 => {
             let mut q = vec![0u16; n * k];
-            run_top_k(mesh, &frame, &nodes, k, &mut indices, TopKWeights::Unorm16(&mut q))?;
+            run_top_k(
+                mesh,
+                &frame,
+                &nodes,
+                k,
+                &mut indices,
+                TopKWeights::Unorm16(&mut q),
+            )?;
             q.iter().map(|&x| f32::from(x) / 65535.0).collect()
         }
         TopKFormat::F32 => {
             let mut q = vec![0f32; n * k];
-            run_top_k(mesh, &frame, &nodes, k, &mut indices, TopKWeights::F32(&mut q))?;
+            run_top_k(
+                mesh,
+                &frame,
+                &nodes,
+                k,
+                &mut indices,
+                TopKWeights::F32(&mut q),
+            )?;
             q
         }
     };
     let offsets = (0..=n).map(|v| (v * k) as u32).collect();
     let joints = indices.iter().map(|&i| u32::from(i)).collect();
-    let skin = StaticSkin::new(offsets, joints, dequantised, j).map_err(|e| {
-        PoseFailure::Runtime(skinfield_runtime::RuntimeError::Skin(e))
-    })?;
+    let skin = StaticSkin::new(offsets, joints, dequantised, j)
+        .map_err(|e| PoseFailure::Runtime(skinfield_runtime::RuntimeError::Skin(e)))?;
     let positions = pose_static(
         &capture.skeleton,
         &skin,

@@ -375,7 +375,10 @@ impl PreparedSkinning {
 
 /// Reads a `.skf` and checks that its skeleton is the capture's (same joint names, same order:
 /// SkinNet's outputs and pose features are per joint in file order).
-pub(crate) fn load_skinnet(path: &std::path::Path, capture: &Capture) -> Result<SkinNetModel, EvalError> {
+pub(crate) fn load_skinnet(
+    path: &std::path::Path,
+    capture: &Capture,
+) -> Result<SkinNetModel, EvalError> {
     let bytes = read_skf_file(path)?;
     let model = SkinNetModel::from_skf(&bytes).map_err(|e| EvalError::Skf {
         path: path.to_owned(),
