@@ -10,12 +10,13 @@ use anyhow::Context;
 use clap::Parser;
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::skf::write_atomic;
+use skinfield_trainer::eval::figure::{Panel, write_error_figure};
+use skinfield_trainer::eval::spread::{spread, spread_table};
 use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
 use skinfield_trainer::eval::{EvalOptions, PreparedSkinning, Skinning, evaluate, evaluate_frames};
 use skinfield_trainer::synth::{SynthConfig, synthesize};
 use skinfield_trainer::train::TrainConfig;
 use skinfield_trainer::train::data::{DataOptions, initial_weights};
-use skinfield_trainer::train::plot::plot_losses;
 
 use super::train::{train_skinnet, train_static};
 
@@ -25,9 +26,14 @@ pub struct Args {
     /// Output folder (capture, model, results, pictures).
     #[arg(long, default_value = "out/demo")]
     pub out: PathBuf,
-    /// Seed of the capture and of training.
+    /// Seed of the capture and of training (the first one with `--seeds`).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Train and evaluate this many seeds (`seed`, `seed + 1`, …, each in `OUT/seed-S`) and
+    /// write the table as mean ± standard deviation per row (`OUT/results.md`,
+    /// `OUT/results_seeds.json`).
+    #[arg(long, default_value_t = 1)]
+    pub seeds: u64,
     /// Cap of SkinNet's warm start (regressing the initial weights; it stops earlier once
     /// converged).
     #[arg(long, default_value_t = TrainConfig::default().warm_start_iterations)]
@@ -51,8 +57,55 @@ pub struct Args {
 
 /// Runs `trainer demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.seeds <= 1 || args.ablation.ablations {
+        return run_seed(&args, args.seed, &args.out).map(|_| ());
+    }
     let total = Instant::now();
-    let out = &args.out;
+    let mut runs = Vec::new();
+    for seed in args.seed..args.seed + args.seeds {
+        println!("== seed {seed}");
+        runs.push(run_seed(
+            &args,
+            seed,
+            &args.out.join(format!("seed-{seed}")),
+        )?);
+    }
+    let rows = spread(&runs, BOUND);
+    let table = spread_table(&rows, BOUND);
+    println!("\n{table}");
+    let mut md = String::new();
+    let _ = writeln!(md, "# Skinfield demo results, {} seeds\n", args.seeds);
+    let _ = writeln!(
+        md,
+        "Built-in capture, seeds {}–{} (each: its own capture and initialisation; per-seed \
+         results in `seed-S/`). Mean ± sample standard deviation over the seeds.\n",
+        args.seed,
+        args.seed + args.seeds - 1
+    );
+    let _ = writeln!(md, "{table}");
+    let _ = writeln!(md, "Total: {:.1} s.", total.elapsed().as_secs_f64());
+    let md_path = args.out.join("results.md");
+    write_atomic(&md_path, md.as_bytes()).with_context(|| md_path.display().to_string())?;
+    let json_path = args.out.join("results_seeds.json");
+    let json = serde_json::to_string_pretty(&rows)? + "\n";
+    write_atomic(&json_path, json.as_bytes()).with_context(|| json_path.display().to_string())?;
+    println!(
+        "total {:.1} s; results in {}",
+        total.elapsed().as_secs_f64(),
+        md_path.display()
+    );
+    Ok(())
+}
+
+/// Top of the error pictures' colour scale (cm).
+const MAX_ERROR_CM: f32 = 2.0;
+
+/// The ceiling the table's gap shares are measured against.
+const BOUND: &str = "bound-pose";
+
+/// The demo for one seed in `out`; returns its table.
+fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec<EvalRow>> {
+    let total = Instant::now();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let capture_dir = out.join("capture");
     let mut timings = Vec::new();
@@ -61,7 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let summary = synthesize(
         &capture_dir,
         &SynthConfig {
-            seed: args.seed,
+            seed,
             ..SynthConfig::default()
         },
     )?;
@@ -82,7 +135,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let model = out.join("model.skf");
     let config = TrainConfig {
-        seed: args.seed,
+        seed,
         iterations: args.iterations,
         warm_start_iterations: args.warm_start,
         ..TrainConfig::default()
@@ -103,7 +156,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             !args.quiet,
         )?;
         println!("total {:.1} s", total.elapsed().as_secs_f64());
-        return Ok(());
+        return Ok(Vec::new());
     }
     let t = Instant::now();
     let skin_work = out.join("train-skinnet");
@@ -152,6 +205,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Skinning::Skf(model.clone()),
         Skinning::Oracle,
         Skinning::OracleDqs,
+        Skinning::BoundStatic,
+        Skinning::BoundPose,
     ];
     let options = EvalOptions::default();
     let rows: Vec<EvalRow> = methods
@@ -169,15 +224,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     write_atomic(&json_path, rows_to_json(&rows).as_bytes())
         .with_context(|| json_path.display().to_string())?;
 
-    // Plots and pictures.
-    for (work, name) in [
-        (&skin_work, "losses_skinnet.png"),
-        (&static_work, "losses_static.png"),
-    ] {
-        let csv_path = work.join("losses.csv");
-        let csv =
-            std::fs::read_to_string(&csv_path).with_context(|| csv_path.display().to_string())?;
-        plot_losses(&csv, &out.join(name))?;
+    // Plots (`trainer train` drew them in its work folders) and pictures.
+    for (work, who) in [(&skin_work, "skinnet"), (&static_work, "static")] {
+        for name in ["losses", "validation"] {
+            let from = work.join(format!("{name}.svg"));
+            let to = out.join(format!("{name}_{who}.svg"));
+            std::fs::copy(&from, &to).with_context(|| format!("copying {}", from.display()))?;
+        }
     }
     // The pictures show the test frame bone heat gets most wrong (a frame near the rest pose
     // would show nothing).
@@ -217,18 +270,40 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             kind,
             frame: Some(frame),
             camera: 1,
-            max_error_cm: 2.0,
+            max_error_cm: MAX_ERROR_CM,
             templates: Vec::new(),
             out: out.join(name),
         })?;
     }
+    // The same frame as the camera saw it, and the error pictures side by side with a scale.
+    let seen = capture.load_image(1, frame)?;
+    let captured = out.join("captured.png");
+    skinfield_formats::capture::write_image_png(&captured, seen.width, seen.height, &seen.rgb)?;
+    let panel = |caption: &str, file: &str| Panel {
+        caption: caption.to_string(),
+        png: out.join(file),
+    };
+    write_error_figure(
+        &out.join("error_panels.svg"),
+        &[
+            panel("initial (bone heat)", "error_initial.png"),
+            panel("static (learned)", "error_static.png"),
+            panel("ours (SkinNet)", "error_ours.png"),
+            panel("captured image", "captured.png"),
+        ],
+        &format!(
+            "Test frame {frame}, camera 1 (the frame bone heat gets most wrong): per-vertex error"
+        ),
+        MAX_ERROR_CM,
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
 
     let mut md = String::new();
     let _ = writeln!(md, "# Skinfield demo results\n");
     let _ = writeln!(
         md,
         "Built-in capture (seed {}), {} test frames, {} surface samples per frame.\n",
-        args.seed,
+        seed,
         capture.test_frames.len(),
         options.samples
     );
@@ -253,5 +328,5 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         total.elapsed().as_secs_f64(),
         out.display()
     );
-    Ok(())
+    Ok(rows)
 }

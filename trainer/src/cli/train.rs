@@ -11,6 +11,7 @@ use skinfield_formats::capture::{Capture, load_capture};
 use skinfield_trainer::eval::static_weights::write_static_weights;
 use skinfield_trainer::skinnet::export::to_skf_model;
 use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
+use skinfield_trainer::train::plot::plot_log;
 use skinfield_trainer::train::stages::{ColourSource, load_images};
 use skinfield_trainer::train::{TrainConfig, Trainer};
 
@@ -147,6 +148,7 @@ pub fn train_skinnet(
     // Stage 4's average, when it ran.
     trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
+    plot_logs(work, "SkinNet")?;
     check_validation(&trainer)?;
     let net = trainer.net().context("the trainer holds no network")?;
     let mut model = to_skf_model(net, &skeleton)?;
@@ -157,6 +159,29 @@ pub fn train_skinnet(
     }
     model.write(out)?;
     Ok(seconds)
+}
+
+/// Plots the stage-1 logs of `work` (`losses.csv`, `validation.csv`, when present) beside them
+/// as SVG.
+pub fn plot_logs(work: &Path, model: &str) -> anyhow::Result<()> {
+    for (name, what) in [
+        ("losses", "image-loss terms per iteration"),
+        ("validation", "held-out silhouettes (validation)"),
+    ] {
+        let csv_path = work.join(format!("{name}.csv"));
+        let Ok(csv) = std::fs::read_to_string(&csv_path) else {
+            continue;
+        };
+        if csv.lines().filter(|l| !l.trim().is_empty()).count() < 2 {
+            continue;
+        }
+        plot_log(
+            &csv,
+            &format!("{model}: {what}"),
+            &work.join(format!("{name}.svg")),
+        )?;
+    }
+    Ok(())
 }
 
 /// Prints the validation scores of the initial weights and of the model about to be written
@@ -245,6 +270,7 @@ pub fn train_static(
     trainer.run(work, progress)?;
     trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
+    plot_logs(work, "Static baseline")?;
     check_validation(&trainer)?;
     let dense = trainer
         .static_weights()?
