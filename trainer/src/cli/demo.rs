@@ -10,6 +10,7 @@ use anyhow::Context;
 use clap::Parser;
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::skf::write_atomic;
+use skinfield_trainer::eval::diagnostics::{diagnostics_markdown, part_errors, terms_on_truth};
 use skinfield_trainer::eval::figure::{Panel, write_error_figure};
 use skinfield_trainer::eval::spread::{spread, spread_table};
 use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
@@ -96,6 +97,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     Ok(())
 }
+
+/// Every this many training frames are scored for the diagnostics' image terms.
+const DIAGNOSTIC_STRIDE: usize = 8;
 
 /// Top of the error pictures' colour scale (cm).
 const MAX_ERROR_CM: f32 = 2.0;
@@ -217,6 +221,26 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         })
         .collect::<anyhow::Result<_>>()?;
     timings.push(("evaluate", t.elapsed().as_secs_f64()));
+
+    // Diagnostics: per-part errors, and the image terms on the truth vs on each method.
+    let t = Instant::now();
+    let compared = [
+        Skinning::Initial,
+        Skinning::Static(static_file.clone()),
+        Skinning::Skf(model.clone()),
+    ];
+    let parts = compared
+        .iter()
+        .map(|m| Ok((m.method_name().to_string(), part_errors(&capture, m)?)))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let terms = terms_on_truth(&capture, &compared, DIAGNOSTIC_STRIDE)?;
+    let diagnostics_path = out.join("diagnostics.md");
+    write_atomic(
+        &diagnostics_path,
+        diagnostics_markdown(&parts, &terms, DIAGNOSTIC_STRIDE).as_bytes(),
+    )
+    .with_context(|| diagnostics_path.display().to_string())?;
+    timings.push(("diagnostics", t.elapsed().as_secs_f64()));
 
     let table = rows_to_table(&rows);
     println!("\n{table}");

@@ -38,6 +38,7 @@
 
 pub mod bounds;
 pub mod bvh;
+pub mod diagnostics;
 pub mod distance;
 pub mod fast;
 pub mod figure;

@@ -148,6 +148,29 @@ pub(crate) fn score(
     let t = &data.template;
     let (v, j) = (t.vertex_count(), data.skeleton.len());
     debug_assert_eq!(weights.len(), frames.len() * v * j);
+    let posed: Vec<Vec<Vec3>> = frames
+        .par_iter()
+        .enumerate()
+        .map(|(b, frame)| {
+            pose(
+                &t.positions,
+                &weights[b * v * j..(b + 1) * v * j],
+                &frame.skinning,
+            )
+        })
+        .collect();
+    score_posed(frames, &posed, &t.triangles, edges)
+}
+
+/// Scores already posed meshes (`posed[b]` for `frames[b]`, triangles `triangles`, edge table
+/// `edges`) on every view of `frames`: the same figures for any mesh, e.g. the ground truth.
+#[must_use]
+pub fn score_posed(
+    frames: &[Frame],
+    posed: &[Vec<Vec3>],
+    triangles: &[[u32; 3]],
+    edges: &EdgeTable,
+) -> ValidationScore {
     struct ViewScore {
         boundary: f64,
         boundary_count: usize,
@@ -160,19 +183,14 @@ pub(crate) fn score(
         .par_iter()
         .enumerate()
         .flat_map(|(b, frame)| {
-            let posed = pose(
-                &t.positions,
-                &weights[b * v * j..(b + 1) * v * j],
-                &frame.skinning,
-            );
+            let posed = &posed[b];
             frame
                 .views
                 .par_iter()
                 .map(move |view| {
                     let terms =
-                        view_terms(&view.camera, &view.target, &posed, &t.triangles, edges, 1.0);
-                    let mesh =
-                        crate::raster::coverage(&view.camera, &posed, &t.triangles, IOU_SAMPLES);
+                        view_terms(&view.camera, &view.target, posed, triangles, edges, 1.0);
+                    let mesh = crate::raster::coverage(&view.camera, posed, triangles, IOU_SAMPLES);
                     let (mut intersection, mut union) = (0.0f64, 0.0f64);
                     for (&a, &b) in mesh.iter().zip(view.coverage.iter()) {
                         intersection += f64::from(a.min(b));

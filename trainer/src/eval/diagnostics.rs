@@ -1,0 +1,255 @@
+//! Diagnostics that explain a run without a debugger, written by `trainer demo` beside its
+//! table (`diagnostics.md`):
+//!
+//! - **per-part errors**: each method's mean and worst per-vertex distance to the ground truth
+//!   on the test frames, for the template's skin and clothing vertices separately (a gain on
+//!   the skirt and a loss on the arms average out in the table's Chamfer);
+//! - **the image terms on the truth**: the silhouette distance and IoU of the ground-truth
+//!   meshes against the training masks, next to each method's. The truth should score lowest;
+//!   a method scoring below the truth is fitting the masks with a wrong shape, and a truth
+//!   scoring far from zero says the masks, cameras or the loss itself are off.
+
+use std::fmt::Write as _;
+
+use glam::Vec3;
+use skinfield_formats::PartLabel;
+use skinfield_formats::capture::Capture;
+
+use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s};
+use crate::losses::silhouette::EdgeTable;
+use crate::train::data::{DataError, DataOptions, initial_weights, train_data};
+use crate::train::validation::{ValidationScore, score_posed};
+
+/// A diagnostic could not be computed.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnosticsError {
+    /// Posing or scoring failed.
+    #[error(transparent)]
+    Eval(#[from] EvalError),
+    /// The training frames could not be loaded.
+    #[error(transparent)]
+    Data(#[from] DataError),
+}
+
+/// One part's errors under one method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PartError {
+    /// `skin`, `clothing`, or `all` for a template without labels.
+    pub part: &'static str,
+    /// Vertices of the part.
+    pub vertices: usize,
+    /// Mean per-vertex distance to the ground-truth surface over the test frames (cm).
+    pub mean_cm: f64,
+    /// The largest per-vertex distance on any test frame (cm).
+    pub worst_cm: f64,
+}
+
+/// Per-part errors of `skinning` on the capture's test frames.
+pub fn part_errors(capture: &Capture, skinning: &Skinning) -> Result<Vec<PartError>, EvalError> {
+    let prepared = PreparedSkinning::new(capture, skinning)?;
+    let labels: Vec<&'static str> = match &capture.template.part_labels {
+        Some(l) => l
+            .iter()
+            .map(|p| match p {
+                PartLabel::Skin => "skin",
+                PartLabel::Clothing => "clothing",
+            })
+            .collect(),
+        None => vec!["all"; capture.template.vertex_count()],
+    };
+    let mut parts: Vec<&'static str> = Vec::new();
+    for &l in &labels {
+        if !parts.contains(&l) {
+            parts.push(l);
+        }
+    }
+    let mut sum = vec![0.0f64; parts.len()];
+    let mut worst = vec![0.0f64; parts.len()];
+    let mut count = vec![0usize; parts.len()];
+    for &f in &capture.test_frames {
+        let posed = prepared.pose_frame(capture, f)?;
+        let d = per_vertex_m2s(capture, f, &posed)?;
+        for (dist, label) in d.iter().zip(&labels) {
+            let k = parts.iter().position(|p| p == label).unwrap_or(0);
+            let cm = 100.0 * f64::from(*dist);
+            sum[k] += cm;
+            worst[k] = worst[k].max(cm);
+            count[k] += 1;
+        }
+    }
+    let frames = capture.test_frames.len().max(1);
+    Ok(parts
+        .iter()
+        .enumerate()
+        .map(|(k, &part)| PartError {
+            part,
+            vertices: count[k] / frames,
+            mean_cm: sum[k] / count[k].max(1) as f64,
+            worst_cm: worst[k],
+        })
+        .collect())
+}
+
+/// The image terms of the ground truth and of each method (row name, score) on every
+/// `stride`-th training frame, all views, at full template resolution. The truth row is
+/// `truth`; it is left out when the capture has no ground truth for its training frames.
+pub fn terms_on_truth(
+    capture: &Capture,
+    methods: &[Skinning],
+    stride: usize,
+) -> Result<Vec<(String, ValidationScore)>, DiagnosticsError> {
+    let mut sub = capture.clone();
+    sub.train_frames = capture
+        .train_frames
+        .iter()
+        .copied()
+        .step_by(stride.max(1))
+        .collect();
+    let initial = initial_weights(&sub)?;
+    let data = train_data(
+        &sub,
+        &initial,
+        &DataOptions {
+            train_vertices: 0,
+            ..DataOptions::default()
+        },
+    )?;
+    let triangles = &capture.template.triangles;
+    let edges = EdgeTable::new(capture.template.vertex_count(), triangles);
+    let mut rows = Vec::new();
+    let truth: Result<Vec<Vec<Vec3>>, _> = sub
+        .train_frames
+        .iter()
+        .map(|&f| capture.evaluation_gt_mesh(f))
+        .collect();
+    if let Ok(truth) = truth {
+        rows.push((
+            "truth".to_string(),
+            score_posed(&data.frames, &truth, triangles, &edges),
+        ));
+    }
+    for m in methods {
+        let prepared = PreparedSkinning::new(capture, m)?;
+        let posed = sub
+            .train_frames
+            .iter()
+            .map(|&f| prepared.pose_frame(capture, f))
+            .collect::<Result<Vec<_>, _>>()?;
+        rows.push((
+            m.method_name().to_string(),
+            score_posed(&data.frames, &posed, triangles, &edges),
+        ));
+    }
+    Ok(rows)
+}
+
+/// Both diagnostics as Markdown.
+#[must_use]
+pub fn diagnostics_markdown(
+    parts: &[(String, Vec<PartError>)],
+    terms: &[(String, ValidationScore)],
+    stride: usize,
+) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "## Per-part errors on the test frames\n");
+    let _ = writeln!(
+        s,
+        "Mean and worst per-vertex distance to the ground-truth surface (cm).\n"
+    );
+    let _ = writeln!(s, "| method | part | vertices | mean (cm) | worst (cm) |");
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- |");
+    for (method, rows) in parts {
+        for p in rows {
+            let _ = writeln!(
+                s,
+                "| {method} | {} | {} | {:.3} | {:.2} |",
+                p.part, p.vertices, p.mean_cm, p.worst_cm
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\n## Image terms on the truth and on each method\n\nEvery {stride}th training frame, \
+         all views, full template resolution: the mean distance between mesh silhouette and \
+         mask outline (pixels; no Huber) and the IoU of the rasterised mesh with the mask. The \
+         truth should score lowest.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| mesh | silhouette (px) | boundary (px) | contour (px) | IoU |"
+    );
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- |");
+    for (name, t) in terms {
+        let _ = writeln!(
+            s,
+            "| {name} | {:.4} | {:.4} | {:.4} | {:.5} |",
+            t.silhouette_px, t.boundary_px, t.contour_px, t.iou
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinfield_formats::capture::load_capture;
+
+    #[test]
+    fn parts_partition_the_vertices_and_average_to_the_per_vertex_mean() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        let parts = part_errors(&capture, &Skinning::Initial).unwrap();
+        let v = capture.template.vertex_count();
+        assert_eq!(parts.iter().map(|p| p.vertices).sum::<usize>(), v);
+        assert_eq!(
+            parts.iter().map(|p| p.part).collect::<Vec<_>>(),
+            ["skin", "clothing"]
+        );
+        // The vertex-weighted mean of the parts is the plain per-vertex mean, computed here
+        // independently.
+        let prepared = PreparedSkinning::new(&capture, &Skinning::Initial).unwrap();
+        let (mut sum, mut worst) = (0.0f64, 0.0f64);
+        for &f in &capture.test_frames {
+            let posed = prepared.pose_frame(&capture, f).unwrap();
+            for d in per_vertex_m2s(&capture, f, &posed).unwrap() {
+                sum += 100.0 * f64::from(d);
+                worst = worst.max(100.0 * f64::from(d));
+            }
+        }
+        let mean = sum / (v * capture.test_frames.len()) as f64;
+        let combined = parts
+            .iter()
+            .map(|p| p.mean_cm * p.vertices as f64)
+            .sum::<f64>()
+            / v as f64;
+        assert!(
+            (combined - mean).abs() < 1e-9 * mean.max(1.0),
+            "{combined} vs {mean}"
+        );
+        assert_eq!(parts.iter().map(|p| p.worst_cm).fold(0.0, f64::max), worst);
+        // The oracle's error is smaller than bone heat's on every part.
+        let oracle = part_errors(&capture, &Skinning::Oracle).unwrap();
+        for (o, i) in oracle.iter().zip(&parts) {
+            assert!(o.mean_cm < i.mean_cm, "{o:?} vs {i:?}");
+        }
+    }
+
+    #[test]
+    fn the_truth_scores_lower_than_bone_heat_on_its_own_masks() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        let rows = terms_on_truth(&capture, &[Skinning::Initial], 1).unwrap();
+        assert_eq!(rows[0].0, "truth");
+        assert_eq!(rows[1].0, "initial");
+        let (truth, initial) = (rows[0].1, rows[1].1);
+        assert!(truth.views > 0 && truth.views == initial.views);
+        assert!(
+            truth.silhouette_px < initial.silhouette_px && truth.iou > initial.iou,
+            "{truth} vs {initial}"
+        );
+        let md = diagnostics_markdown(&[], &rows, 1);
+        assert!(md.contains("| truth |") && md.contains("| initial |"));
+    }
+}
