@@ -7,9 +7,9 @@ use half::f16;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{
-    self, ALIGN, Dtype, HEADER_LEN, MAX_FILE_LEN, MAX_HIDDEN_LAYERS, MAX_TENSORS, ModelConfig, Net,
-    SECTION_ENTRY_LEN, SkfConfigError, SkfError, SkfModel, SkfView, TENSOR_ENTRY_LEN,
-    file_checksum, read_skf_file, tag,
+    self, ALIGN, Candidates, Dtype, HEADER_LEN, MAX_FILE_LEN, MAX_HIDDEN_LAYERS, MAX_TENSORS,
+    ModelConfig, Net, SECTION_ENTRY_LEN, SkfConfigError, SkfError, SkfModel, SkfView,
+    TENSOR_ENTRY_LEN, file_checksum, read_skf_file, tag,
 };
 use skinfield_formats::{Skeleton, Transform};
 
@@ -181,6 +181,18 @@ fn every_truncated_prefix_is_an_error() {
             "cut {cut}: {e}"
         );
     }
+    // With a CAND section (version 1.1): every prefix too.
+    let bytes = with_candidates().to_bytes().unwrap();
+    SkfView::parse(&bytes).unwrap().candidates().unwrap();
+    for cut in 0..bytes.len() {
+        assert!(
+            matches!(
+                SkfView::parse(&bytes[..cut]),
+                Err(SkfError::Truncated { .. })
+            ),
+            "CAND file, cut {cut}"
+        );
+    }
     // The full-size file: every prefix through the tables, then every 61st.
     let (_, bytes) = full();
     let data = section(&bytes, tag::DATA).1;
@@ -193,6 +205,17 @@ fn every_truncated_prefix_is_an_error() {
             "cut {cut}"
         );
     }
+}
+
+/// The small model with three anchors and their candidate lists.
+fn with_candidates() -> SkfModel {
+    let (mut m, _) = small();
+    m.candidates = Some(Candidates {
+        positions: vec![[0.0, 0.5, 0.0], [0.1, 1.0, 0.0], [-0.2, 1.5, 0.1]],
+        lists: vec![vec![0, 1], vec![1], vec![0, 1, 2]],
+        k: 3,
+    });
+    m
 }
 
 fn reseal(b: &mut [u8]) {
@@ -769,4 +792,9 @@ fn write_fuzz_seeds() {
     let bytes = m.to_bytes().unwrap();
     SkfView::parse(&bytes).unwrap();
     std::fs::write(dir.join("three_nets.skf"), &bytes).unwrap();
+    std::fs::write(
+        dir.join("candidates.skf"),
+        with_candidates().to_bytes().unwrap(),
+    )
+    .unwrap();
 }

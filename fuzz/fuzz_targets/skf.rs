@@ -18,6 +18,11 @@ fn exercise(v: &SkfView<'_>) {
         let _ = (s.name(j), s.parent(j), s.bind_local(j), s.inverse_bind(j));
     }
     let _ = s.to_skeleton();
+    if let Some(c) = v.candidates() {
+        for a in 0..c.len() {
+            let _ = (c.position(a), c.joints(a).count());
+        }
+    }
     for net in [Net::Skin, Net::Albedo, Net::Shadow] {
         for i in 0..=v.config().hidden_widths().len() + 1 {
             let _ = v.layer(net, i);

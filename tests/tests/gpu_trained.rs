@@ -12,7 +12,6 @@ use skinfield_formats::skf::SkfView;
 use skinfield_formats::{pose_feature_count, pose_features};
 use skinfield_runtime::gpu::{GpuSkinner, SkinnedVertex, Skinning, headless_device};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
-use skinfield_trainer::skinnet::export::to_skf_model;
 use skinfield_trainer::synth::{SynthConfig, synthesize};
 use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
 use skinfield_trainer::train::{TrainConfig, Trainer};
@@ -58,10 +57,11 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
     for _ in 0..image {
         trainer.step().unwrap();
     }
-    let bytes = to_skf_model(trainer.net().unwrap(), &capture.skeleton)
-        .unwrap()
-        .to_bytes()
-        .unwrap();
+    // Exported as `trainer train` does: with its candidate joints (CAND), which the GPU's
+    // masked softmax must honour like the CPU path.
+    let model = trainer.skf_model().unwrap();
+    assert!(model.candidates.is_some());
+    let bytes = model.to_bytes().unwrap();
     let view = SkfView::parse(&bytes).unwrap();
     let cpu_net = SkinNet::from_view(&view).unwrap();
 

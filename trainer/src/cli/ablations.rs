@@ -19,7 +19,6 @@ use skinfield_formats::capture::Capture;
 use skinfield_formats::skf::write_atomic;
 use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
 use skinfield_trainer::eval::{EvalOptions, Skinning, evaluate};
-use skinfield_trainer::skinnet::export::to_skf_model;
 use skinfield_trainer::train::data::{DataOptions, train_data};
 use skinfield_trainer::train::stages::{ColourSource, StageConfig, load_images};
 use skinfield_trainer::train::{TrainConfig, Trainer};
@@ -202,9 +201,7 @@ pub fn run(
                 None
             };
             trainer.adopt_average()?;
-            let net = trainer.net().context("the trainer holds no network")?;
-            let mut model = to_skf_model(net, &capture.skeleton)?;
-            model.candidates = trainer.export_candidates();
+            let mut model = trainer.skf_model()?;
             if let Some(a) =
                 appearance.filter(|_| v.stages.colours != ColourSource::FixedVertexColours)
             {

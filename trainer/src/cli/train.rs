@@ -9,7 +9,6 @@ use clap::Parser;
 use skinfield_formats::StaticSkin;
 use skinfield_formats::capture::{Capture, load_capture};
 use skinfield_trainer::eval::static_weights::write_static_weights;
-use skinfield_trainer::skinnet::export::to_skf_model;
 use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
 use skinfield_trainer::train::plot::plot_log;
 use skinfield_trainer::train::stages::{ColourSource, load_images};
@@ -124,7 +123,6 @@ pub fn train_skinnet(
     progress: bool,
 ) -> anyhow::Result<f64> {
     let data = train_data(capture, initial, options)?;
-    let skeleton = data.skeleton.clone();
     let mut trainer = Trainer::new(data, config, false)?;
     if resume {
         trainer.resume(&work.join("checkpoint.safetensors"))?;
@@ -150,9 +148,7 @@ pub fn train_skinnet(
     let seconds = start.elapsed().as_secs_f64();
     plot_logs(work, "SkinNet")?;
     check_validation(&trainer)?;
-    let net = trainer.net().context("the trainer holds no network")?;
-    let mut model = to_skf_model(net, &skeleton)?;
-    model.candidates = trainer.export_candidates();
+    let mut model = trainer.skf_model()?;
     // Fixed vertex colours leave the nets untrained: storing them would show noise in a viewer.
     if let Some(a) = appearance.filter(|_| stages.colours != ColourSource::FixedVertexColours) {
         a.push_to_skf(&mut model)?;

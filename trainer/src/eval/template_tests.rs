@@ -86,7 +86,6 @@ fn a_trained_model_poses_resampled_templates_without_nan() {
         ..Default::default()
     };
     let data = crate::train::data::train_data(&capture, &initial, &options).unwrap();
-    let skeleton = data.skeleton.clone();
     let config = crate::train::TrainConfig {
         iterations: 2,
         warm_start_iterations: 3,
@@ -97,10 +96,7 @@ fn a_trained_model_poses_resampled_templates_without_nan() {
     };
     let mut trainer = crate::train::Trainer::new(data, config, false).unwrap();
     trainer.run(&dir.path().join("work"), false).unwrap();
-    let bytes = crate::skinnet::export::to_skf_model(trainer.net().unwrap(), &skeleton)
-        .unwrap()
-        .to_bytes()
-        .unwrap();
+    let bytes = trainer.skf_model().unwrap().to_bytes().unwrap();
     let model = SkinNetModel::from_skf(&bytes).unwrap();
     let j = model.joint_count();
     let n = capture.template.vertex_count();

@@ -105,6 +105,9 @@ pub enum TrainError {
         /// The cause.
         source: std::io::Error,
     },
+    /// Exporting the model failed.
+    #[error(transparent)]
+    Export(#[from] crate::skinnet::export::ExportError),
     /// A checkpoint does not match this run.
     #[error("{path}: {reason}")]
     Checkpoint {
@@ -721,6 +724,18 @@ impl Trainer {
     #[must_use]
     pub fn profile(&self) -> &StepProfile {
         &self.profile
+    }
+
+    /// The network as `.skf` content with its candidate joints (the `CAND` section): what
+    /// `trainer train` writes. Exporting the network alone would let every joint back into a
+    /// softmax that was trained over the candidates only.
+    pub fn skf_model(&self) -> Result<skinfield_formats::skf::SkfModel, TrainError> {
+        let net = self
+            .net()
+            .ok_or_else(|| TrainError::Data("the static baseline has no network".into()))?;
+        let mut model = crate::skinnet::export::to_skf_model(net, &self.data.skeleton)?;
+        model.candidates = self.export_candidates();
+        Ok(model)
     }
 
     /// The network (`None` for the static baseline).
