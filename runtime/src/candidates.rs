@@ -161,24 +161,17 @@ pub fn nearest_anchors(anchors: &[Vec3], points: &[Vec3]) -> Vec<u32> {
 /// −∞. `tile` is `[joint][TILE]`; `lists` holds `k` slots per lane (lanes past the mesh hold
 /// only [`NO_JOINT`] and are left alone).
 pub(crate) fn mask_logits(tile: &mut [f32], joints: usize, lists: &[u16], k: usize) {
-    for (lane, list) in lists.chunks_exact(k).enumerate().take(TILE) {
-        if list[0] == NO_JOINT {
-            continue;
-        }
-        let mut next = 0;
-        for j in 0..joints {
-            if next < k && list[next] as usize == j {
-                next += 1;
-            } else {
-                tile[j * TILE + lane] = f32::NEG_INFINITY;
-            }
-        }
-    }
+    fill_non_candidates(tile, joints, lists, k, f32::NEG_INFINITY);
 }
 
 /// After the softmax: the weights of non-candidates are exactly zero (the SIMD exponential
 /// clamps its argument, so −∞ came out as ~1e-38).
 pub(crate) fn clear_masked(tile: &mut [f32], joints: usize, lists: &[u16], k: usize) {
+    fill_non_candidates(tile, joints, lists, k, 0.0);
+}
+
+/// Writes `value` at every joint of every lane that is not among the lane's candidates.
+fn fill_non_candidates(tile: &mut [f32], joints: usize, lists: &[u16], k: usize, value: f32) {
     for (lane, list) in lists.chunks_exact(k).enumerate().take(TILE) {
         if list[0] == NO_JOINT {
             continue;
@@ -188,7 +181,7 @@ pub(crate) fn clear_masked(tile: &mut [f32], joints: usize, lists: &[u16], k: us
             if next < k && list[next] as usize == j {
                 next += 1;
             } else {
-                tile[j * TILE + lane] = 0.0;
+                tile[j * TILE + lane] = value;
             }
         }
     }
