@@ -52,6 +52,7 @@ fn bench_gpu(c: &mut Criterion) {
         config,
         skeleton: skeleton.clone(),
         tensors: Vec::new(),
+        candidates: None,
     };
     for (l, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
         let s = 2.0 / (inp as f32).sqrt();

@@ -213,17 +213,19 @@ impl Capture {
     }
 
     /// EVALUATION ONLY — the trainer must never call this. Ground-truth posed vertex positions
-    /// of test frame `frame` (same vertex order and triangles as [`Capture::template`]).
+    /// of test frame `frame` (same vertex order and triangles as [`Capture::template`]); also of
+    /// a training frame when the capture has its file (synthetic captures write every frame's,
+    /// for the evaluation's bounds: the best static weights are fitted to the training frames).
     pub fn evaluation_gt_mesh(&self, frame: usize) -> Result<Vec<Vec3>, CaptureError> {
         let manifest_file = self.dir.join(MANIFEST_FILE);
         let eval = self.manifest.evaluation.as_ref().ok_or_else(|| {
             CaptureError::invalid(&manifest_file, "evaluation", "capture has no ground truth")
         })?;
-        if !self.test_frames.contains(&frame) {
+        if !self.test_frames.contains(&frame) && !self.train_frames.contains(&frame) {
             return Err(CaptureError::invalid(
                 &manifest_file,
                 "test_frames",
-                format!("frame {frame} is not a test frame"),
+                format!("frame {frame} is neither a test nor a training frame"),
             ));
         }
         let path = self

@@ -51,6 +51,7 @@ fn model(config: ModelConfig, seed: u64) -> SkfModel {
         config,
         skeleton,
         tensors: Vec::new(),
+        candidates: None,
     };
     let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
     for (i, (out, inp)) in shapes.into_iter().enumerate() {

@@ -61,6 +61,9 @@ pub struct BoundMesh {
     /// `tiles × pre_rows × TILE`.
     pre: Vec<f32>,
     pre_rows: usize,
+    /// With a model that has candidate joints: `tiles × TILE × k` lists (the nearest anchor's
+    /// per vertex; lanes past the mesh padded with `NO_JOINT`), and `k`.
+    candidates: Option<(Vec<u16>, usize)>,
 }
 
 impl BoundMesh {
@@ -102,12 +105,38 @@ impl BoundMesh {
             }
             model.position_parts(&pe, &zeros, out);
         }
+        let candidates = model.anchors().map(|a| {
+            let k = a.k();
+            let mut lists = a.lists_for(positions);
+            lists.resize(
+                tiles * TILE * k,
+                skinfield_formats::skf::candidates::NO_JOINT,
+            );
+            (lists, k)
+        });
         Ok(Self {
             model_id: model.id(),
             rest: positions.to_vec(),
             pre,
             pre_rows,
+            candidates,
         })
+    }
+
+    /// The candidate joints of vertex `v` (`k` slots padded with `0xFFFF`), if the model has
+    /// candidates.
+    #[must_use]
+    pub fn candidates(&self, v: usize) -> Option<&[u16]> {
+        self.candidates
+            .as_ref()
+            .and_then(|(l, k)| l.get(v * k..(v + 1) * k))
+    }
+
+    /// The candidate lists of tile `t`'s lanes.
+    pub(crate) fn tile_candidates(&self, t: usize) -> Option<&[u16]> {
+        self.candidates
+            .as_ref()
+            .map(|(l, k)| &l[t * TILE * k..(t + 1) * TILE * k])
     }
 
     /// Number of vertices.

@@ -189,7 +189,13 @@ impl<W: AsRef<[f32]>> SkinJob<'_, W> {
         let rest = self.mesh.rest_positions();
         let (first, end) = (self.first_vertex, self.first_vertex + count);
         for t in first / TILE..=(end - 1) / TILE {
-            let w = model.forward_tile(self.mesh.tile(t), self.frame.frame_bias(), a, b);
+            let w = model.forward_tile(
+                self.mesh.tile(t),
+                self.frame.frame_bias(),
+                self.mesh.tile_candidates(t),
+                a,
+                b,
+            );
             for v in first.max(t * TILE)..end.min((t + 1) * TILE) {
                 let (lane, i) = (v - t * TILE, v - first);
                 let infl = (0..j_count).map(|j| (j, w[j * TILE + lane]));
@@ -330,9 +336,13 @@ impl<W: AsRef<[f32]>> WeightsJob<'_, W> {
         let (a, b) = scratch.buffers(self.model.layout().max_rows_p * TILE)?;
         let (first, end) = (self.first_vertex, self.first_vertex + count);
         for t in first / TILE..=(end - 1) / TILE {
-            let w = self
-                .model
-                .forward_tile(self.mesh.tile(t), self.frame.frame_bias(), a, b);
+            let w = self.model.forward_tile(
+                self.mesh.tile(t),
+                self.frame.frame_bias(),
+                self.mesh.tile_candidates(t),
+                a,
+                b,
+            );
             for v in first.max(t * TILE)..end.min((t + 1) * TILE) {
                 let (lane, i) = (v - t * TILE, v - first);
                 for (j, dst) in self.out_weights[i * j_count..(i + 1) * j_count]

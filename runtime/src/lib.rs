@@ -26,6 +26,7 @@ extern crate alloc;
 
 pub mod activation;
 pub mod bind;
+pub mod candidates;
 pub mod error;
 pub mod frame;
 #[cfg(feature = "gpu")]

@@ -145,6 +145,8 @@ pub struct SkinNet<W> {
     skeleton: Skeleton,
     kernel: Kernel,
     id: u64,
+    /// The candidate joints of the canonical anchors (`CAND`); `None`: every joint everywhere.
+    anchors: Option<crate::candidates::AnchorSet>,
 }
 
 /// A SkinNet that owns its expanded weights.
@@ -237,8 +239,14 @@ impl SkinNetModel {
     pub fn from_view(view: &SkfView<'_>) -> Result<Self, RuntimeError> {
         let mut weights = vec![0.0; expanded_len(view.config())];
         let net = SkinNet::expand_into(view, &mut weights)?;
-        let (layout, config, skeleton, kernel, id) =
-            (net.layout, net.config, net.skeleton, net.kernel, net.id);
+        let (layout, config, skeleton, kernel, id, anchors) = (
+            net.layout,
+            net.config,
+            net.skeleton,
+            net.kernel,
+            net.id,
+            net.anchors,
+        );
         Ok(SkinNet {
             weights,
             layout,
@@ -246,6 +254,7 @@ impl SkinNetModel {
             skeleton,
             kernel,
             id,
+            anchors,
         })
     }
 
@@ -287,6 +296,9 @@ impl<'w> SkinNet<&'w [f32]> {
             skeleton,
             kernel: Kernel::detect(),
             id,
+            anchors: view
+                .candidates()
+                .map(|c| crate::candidates::AnchorSet::from_view(&c)),
         })
     }
 }
@@ -296,6 +308,13 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
     #[must_use]
     pub fn config(&self) -> &ModelConfig {
         &self.config
+    }
+
+    /// The anchors and candidate joints of the file (`None`: every joint is a candidate of
+    /// every vertex).
+    #[must_use]
+    pub fn anchors(&self) -> Option<&crate::candidates::AnchorSet> {
+        self.anchors.as_ref()
     }
 
     /// The file's skeleton (joint order = output order = pose-feature order).
@@ -390,6 +409,7 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
         &self,
         pre: &[f32],
         fb: &[f32],
+        candidates: Option<&[u16]>,
         a: &'s mut [f32],
         b: &'s mut [f32],
     ) -> &'s [f32] {
@@ -419,7 +439,15 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
             );
             core::mem::swap(&mut src, &mut dst);
         }
-        kernels::softmax_tile(self.kernel, src, self.layout.joints);
+        let joints = self.layout.joints;
+        match (candidates, &self.anchors) {
+            (Some(lists), Some(a)) => {
+                crate::candidates::mask_logits(src, joints, lists, a.k());
+                kernels::softmax_tile(self.kernel, src, joints);
+                crate::candidates::clear_masked(src, joints, lists, a.k());
+            }
+            _ => kernels::softmax_tile(self.kernel, src, joints),
+        }
         src
     }
 

@@ -110,6 +110,7 @@ fn random_model(config: ModelConfig, seed: u64) -> (Vec<u8>, Skeleton, Pose) {
         config,
         skeleton: skeleton.clone(),
         tensors: Vec::new(),
+        candidates: None,
     };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (l, &(out, inp)) in shapes.iter().enumerate() {

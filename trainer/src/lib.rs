@@ -3,6 +3,7 @@
 
 pub mod appearance;
 pub mod bilinear;
+pub mod candidates;
 pub mod eval;
 pub mod geodesic;
 pub mod heat;

@@ -150,6 +150,7 @@ fn skf_model() {
         config,
         skeleton,
         tensors: Vec::new(),
+        candidates: None,
     };
     let shapes: Vec<(usize, usize)> = model.config.layer_shapes(Net::Skin).collect();
     for (i, (o, n)) in shapes.into_iter().enumerate() {

@@ -143,6 +143,7 @@ fn model_weights_drive_the_matching_skin() {
         config,
         skeleton: skin.skeleton.clone(),
         tensors: Vec::new(),
+        candidates: None,
     };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (i, (o, k)) in shapes.into_iter().enumerate() {

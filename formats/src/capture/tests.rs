@@ -147,10 +147,16 @@ fn round_trip_write_then_load_gives_equal_data() {
         assert_eq!(c.initial_weights.as_ref(), Some(&skin));
         assert_eq!(c.evaluation_true_weights().unwrap(), Some(skin.clone()));
         assert_eq!(c.evaluation_gt_mesh(2).unwrap(), gt);
+        // Training frame 1 has no ground-truth file in this capture: a typed error naming it.
         assert!(
-            c.evaluation_gt_mesh(1).is_err(),
-            "training frames have no ground truth"
+            matches!(c.evaluation_gt_mesh(1), Err(CaptureError::Io { file, .. }) if file.ends_with("00001.bin")),
+            "a missing training-frame file"
         );
+        // A frame that is neither training nor test is refused by the manifest's rules.
+        assert!(matches!(
+            c.evaluation_gt_mesh(7),
+            Err(CaptureError::Invalid { .. })
+        ));
         assert_eq!(
             (c.train_frames.clone(), c.test_frames.clone()),
             (vec![0, 1], vec![2])

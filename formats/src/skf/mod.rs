@@ -12,6 +12,8 @@
 //!                  joint_count × 128 B records | names (UTF-8)
 //! TINF             tensor_count u32 | 0 u32 | tensor_count × 64 B entries
 //! DATA             tensor bytes, each tensor 64-byte aligned
+//! CAND             (version 1.1, optional) candidate joints of canonical anchors, see
+//!                  [`candidates`]
 //! ```
 //!
 //! Every section starts on a 64-byte boundary; the bytes between sections are zero padding of
@@ -23,22 +25,25 @@
 //! Sections with unknown tags are skipped (room for later minor versions); a different major
 //! version is refused.
 
+pub mod candidates;
 mod config;
 mod view;
 #[cfg(feature = "std")]
 mod write;
 
+pub use candidates::CandidatesView;
 pub use config::{ModelConfig, Net, SkfConfigError};
 pub use view::{Dtype, SkeletonView, SkfError, SkfView, Tag, TensorName, TensorView};
 #[cfg(feature = "std")]
-pub use write::{SkfFileError, SkfModel, read_skf_file, write_atomic};
+pub use write::{Candidates, SkfFileError, SkfModel, read_skf_file, write_atomic};
 
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"SKINFLD\0";
 /// Major version this crate reads and writes.
 pub const VERSION_MAJOR: u16 = 1;
-/// Minor version this crate writes.
-pub const VERSION_MINOR: u16 = 0;
+/// Minor version this crate writes for a file with a `CAND` section (files without one are
+/// written as 1.0, which every reader of major version 1 reads).
+pub const VERSION_MINOR: u16 = 1;
 /// Size of the fixed header.
 pub const HEADER_LEN: usize = 64;
 /// Size of one section-table entry.
@@ -78,6 +83,8 @@ pub mod tag {
     pub const TINF: [u8; 4] = *b"TINF";
     /// Tensor data.
     pub const DATA: [u8; 4] = *b"DATA";
+    /// Candidate joints of canonical anchors (version 1.1).
+    pub const CAND: [u8; 4] = *b"CAND";
 }
 
 /// FNV-1a 64 over `bytes`, continuing from `state` (start with [`FNV_OFFSET`]).

@@ -121,6 +121,16 @@ pub enum SkfError {
     /// A section appears twice.
     #[error("section `{0}` appears twice")]
     DuplicateSection(Tag),
+    /// The `CAND` section's anchor count is zero or above the cap.
+    #[error("CAND: {0} anchors is out of range")]
+    AnchorCount(u64),
+    /// The `CAND` section's list length is zero or above the cap.
+    #[error("CAND: {0} candidates per anchor is out of range")]
+    CandidateCount(u64),
+    /// An anchor's position is not finite, or its candidate list is empty, unsorted, repeats a
+    /// joint, names a joint the skeleton lacks or continues after its padding.
+    #[error("CAND: anchor {0} is invalid")]
+    BadAnchor(u32),
     /// A section has the wrong length for its contents.
     #[error("section `{tag}` is {len} bytes, expected {expected}")]
     SectionLength {
@@ -418,6 +428,7 @@ pub struct SkfView<'a> {
     table: &'a [u8],
     data: &'a [u8],
     minor: u16,
+    candidates: Option<super::candidates::CandidatesView<'a>>,
 }
 
 fn le_u16(b: &[u8], at: usize) -> u16 {
@@ -504,7 +515,7 @@ impl<'a> SkfView<'a> {
                 len,
             });
         }
-        let mut found: [Option<&[u8]>; 4] = [None; 4];
+        let mut found: [Option<&[u8]>; 5] = [None; 5];
         let mut cursor = table_end;
         for s in 0..section_count as usize {
             let e = &bytes
@@ -535,6 +546,7 @@ impl<'a> SkfView<'a> {
                 tag::SKEL => 1,
                 tag::TINF => 2,
                 tag::DATA => 3,
+                tag::CAND => 4,
                 _ => continue,
             };
             if found[slot].is_some() {
@@ -562,12 +574,20 @@ impl<'a> SkfView<'a> {
         let config = ModelConfig::from_bytes(conf)?;
         let skeleton = Self::parse_skeleton(skel, &config)?;
         let table = Self::parse_table(tinf, data)?;
+        let candidates = match found[4] {
+            Some(body) => Some(super::candidates::CandidatesView::parse(
+                body,
+                config.joint_count as usize,
+            )?),
+            None => None,
+        };
         let view = Self {
             config,
             skeleton,
             table,
             data,
             minor,
+            candidates,
         };
         for net in [Net::Skin, Net::Albedo, Net::Shadow] {
             if config.nets & net.bit() != 0 {
@@ -779,6 +799,13 @@ impl<'a> SkfView<'a> {
     #[must_use]
     pub fn minor_version(&self) -> u16 {
         self.minor
+    }
+
+    /// The candidate joints of the canonical anchors (`CAND`), if the file has them; without
+    /// them every joint is a candidate everywhere.
+    #[must_use]
+    pub fn candidates(&self) -> Option<super::candidates::CandidatesView<'a>> {
+        self.candidates
     }
 
     /// The stored skeleton (joint order = SkinNet output order = pose-feature order).

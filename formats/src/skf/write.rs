@@ -19,6 +19,19 @@ pub struct SkfModel {
     pub skeleton: Skeleton,
     /// `(name, dims, values)`; dims `[n]` or `[out, in]`.
     pub tensors: Vec<(String, Vec<usize>, Vec<f32>)>,
+    /// The candidate joints of canonical anchors (the `CAND` section), if any.
+    pub candidates: Option<Candidates>,
+}
+
+/// Anchors in the canonical space and the joints a point near each may be skinned to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidates {
+    /// Canonical anchor positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Per anchor, its candidate joints (ascending, at most `k`).
+    pub lists: Vec<Vec<u16>>,
+    /// List slots per anchor.
+    pub k: usize,
 }
 
 /// A `.skf` read or write failure, naming the file.
@@ -166,12 +179,32 @@ impl SkfModel {
         }
 
         let conf = self.config.to_bytes();
-        let sections: [(&[u8; 4], &[u8]); 4] = [
+        let cand = match &self.candidates {
+            Some(c) if c.positions.len() != c.lists.len() => {
+                return Err(invalid(format!(
+                    "{} anchors but {} candidate lists",
+                    c.positions.len(),
+                    c.lists.len()
+                )));
+            }
+            Some(c) if c.lists.iter().any(|l| l.len() > c.k) => {
+                return Err(invalid(format!(
+                    "a candidate list is longer than k = {}",
+                    c.k
+                )));
+            }
+            Some(c) => Some(candidates::cand_bytes(&c.positions, &c.lists, c.k)),
+            None => None,
+        };
+        let mut sections: Vec<(&[u8; 4], &[u8])> = vec![
             (&tag::CONF, &conf),
             (&tag::SKEL, &skel),
             (&tag::TINF, &tinf),
             (&tag::DATA, &data),
         ];
+        if let Some(c) = &cand {
+            sections.push((&tag::CAND, c));
+        }
         let mut out = vec![0u8; HEADER_LEN + SECTION_ENTRY_LEN * sections.len()];
         for (s, (t, body)) in sections.iter().enumerate() {
             let offset = align_up(out.len()).ok_or_else(|| invalid("file too large".into()))?;
@@ -184,7 +217,8 @@ impl SkfModel {
         }
         out[..8].copy_from_slice(&MAGIC);
         out[8..10].copy_from_slice(&VERSION_MAJOR.to_le_bytes());
-        out[10..12].copy_from_slice(&VERSION_MINOR.to_le_bytes());
+        let minor = if cand.is_some() { VERSION_MINOR } else { 0 };
+        out[10..12].copy_from_slice(&minor.to_le_bytes());
         out[12..16].copy_from_slice(&(sections.len() as u32).to_le_bytes());
         let len = out.len() as u64;
         out[16..24].copy_from_slice(&len.to_le_bytes());
@@ -271,6 +305,7 @@ mod tests {
             config,
             skeleton,
             tensors: Vec::new(),
+            candidates: None,
         };
         for (i, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
             model.push_layer(Net::Skin, i, vec![0.5; out * inp], out, inp, vec![0.0; out]);

@@ -317,6 +317,15 @@ impl GpuSkinner {
         format: Option<WeightFormat>,
     ) -> Result<GpuModel, GpuError> {
         let config = *view.config();
+        if let Some(c) = view.candidates() {
+            // The WGSL softmax has no candidate mask yet: refuse rather than skin every vertex
+            // with joints it was never trained on.
+            return Err(GpuError::Unsupported {
+                what: "candidate joints per anchor (CAND)",
+                value: c.k(),
+                max: 0,
+            });
+        }
         let hidden = config.hidden_widths();
         let n = hidden.len();
         for &w in hidden {

@@ -55,6 +55,7 @@ pub fn random_model(config: ModelConfig, seed: u64) -> SkfModel {
         config,
         skeleton,
         tensors: Vec::new(),
+        candidates: None,
     };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (i, (out, inp)) in shapes.into_iter().enumerate() {

@@ -199,6 +199,7 @@ pub fn run(
             trainer.adopt_average()?;
             let net = trainer.net().context("the trainer holds no network")?;
             let mut model = to_skf_model(net, &capture.skeleton)?;
+            model.candidates = trainer.export_candidates();
             if let Some(a) =
                 appearance.filter(|_| v.stages.colours != ColourSource::FixedVertexColours)
             {

@@ -142,6 +142,7 @@ pub fn train_skinnet(
     let seconds = start.elapsed().as_secs_f64();
     let net = trainer.net().context("the trainer holds no network")?;
     let mut model = to_skf_model(net, &skeleton)?;
+    model.candidates = trainer.export_candidates();
     // Fixed vertex colours leave the nets untrained: storing them would show noise in a viewer.
     if let Some(a) = appearance.filter(|_| stages.colours != ColourSource::FixedVertexColours) {
         a.push_to_skf(&mut model)?;

@@ -52,7 +52,10 @@
 //! | `skf:FILE` | `ours` | SkinNet's pose-dependent weights from a `.skf`, by `skinfield_runtime` | LBS |
 //! | `oracle` | `oracle` | the ground-truth deformer's own static weights | LBS |
 //! | `oracle-dqs` | `oracle-dqs` | the same | DQS |
+//! | `bound-static` | `bound-static` | the best static weights for the training frames' ground truth ([`bounds`]) | LBS |
+//! | `bound-pose` | `bound-pose` | the best per-frame weights within the candidate joints ([`bounds`]) | LBS |
 
+pub mod bounds;
 pub mod bvh;
 pub mod distance;
 pub mod posing;
@@ -91,6 +94,10 @@ pub enum Skinning {
     Oracle,
     /// The ground-truth deformer's static weights under DQS.
     OracleDqs,
+    /// The best static weights for the training frames' ground truth, under LBS.
+    BoundStatic,
+    /// The best weights of each test frame within the candidate joints, under LBS.
+    BoundPose,
 }
 
 impl Skinning {
@@ -103,13 +110,17 @@ impl Skinning {
             Self::Skf(_) => "ours",
             Self::Oracle => "oracle",
             Self::OracleDqs => "oracle-dqs",
+            Self::BoundStatic => "bound-static",
+            Self::BoundPose => "bound-pose",
         }
     }
 }
 
 /// A `--weights` argument that names no skinning method.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("`{0}` is not a skinning: expected initial, static:FILE, skf:FILE, oracle or oracle-dqs")]
+#[error(
+    "`{0}` is not a skinning: expected initial, static:FILE, skf:FILE, oracle, oracle-dqs, bound-static or bound-pose"
+)]
 pub struct ParseSkinningError(pub String);
 
 impl FromStr for Skinning {
@@ -127,6 +138,8 @@ impl FromStr for Skinning {
             "initial" => Ok(Self::Initial),
             "oracle" => Ok(Self::Oracle),
             "oracle-dqs" => Ok(Self::OracleDqs),
+            "bound-static" => Ok(Self::BoundStatic),
+            "bound-pose" => Ok(Self::BoundPose),
             _ => match s.split_once(':') {
                 Some(("static", rest)) => Ok(Self::Static(file(rest)?)),
                 Some(("skf", rest)) => Ok(Self::Skf(file(rest)?)),
@@ -244,30 +257,48 @@ enum Weights {
         model: Box<SkinNetModel>,
         path: PathBuf,
     },
+    /// Fitted per frame to the ground truth within each vertex's candidate joints.
+    BestPosed {
+        candidates: Vec<Vec<u16>>,
+    },
 }
 
 impl PreparedSkinning {
     /// Loads what `skinning` needs from `capture` (and from its file, if any).
     pub fn new(capture: &Capture, skinning: &Skinning) -> Result<Self, EvalError> {
         let manifest = capture.dir.join(skinfield_formats::capture::MANIFEST_FILE);
+        let initial = || -> Result<StaticSkin, EvalError> {
+            Ok(match &capture.initial_weights {
+                Some(skin) => skin.clone(),
+                None => {
+                    crate::heat::bone_heat(
+                        &capture.template,
+                        &capture.skeleton,
+                        &crate::heat::HeatOptions::default(),
+                    )
+                    .map_err(|source| EvalError::InitialWeights {
+                        path: manifest.clone(),
+                        source,
+                    })?
+                    .skin
+                }
+            })
+        };
         let weights = match skinning {
             Skinning::Initial => Weights::Static {
-                skin: match &capture.initial_weights {
-                    Some(skin) => skin.clone(),
-                    None => {
-                        crate::heat::bone_heat(
-                            &capture.template,
-                            &capture.skeleton,
-                            &crate::heat::HeatOptions::default(),
-                        )
-                        .map_err(|source| EvalError::InitialWeights {
-                            path: manifest,
-                            source,
-                        })?
-                        .skin
-                    }
-                },
+                skin: initial()?,
                 blend: Blend::Linear,
+            },
+            Skinning::BoundStatic => Weights::Static {
+                skin: bounds::best_static_weights(capture)?,
+                blend: Blend::Linear,
+            },
+            Skinning::BoundPose => Weights::BestPosed {
+                candidates: crate::candidates::candidate_sets(
+                    &crate::losses::dense_weights(&initial()?),
+                    &capture.skeleton,
+                    crate::candidates::DEFAULT_CANDIDATES,
+                ),
             },
             Skinning::Static(path) => Weights::Static {
                 skin: read_static_weights(
@@ -337,6 +368,16 @@ impl PreparedSkinning {
             Weights::Static { skin, blend } => {
                 pose_static(&capture.skeleton, skin, rest, pose, *blend)
                     .map_err(|source| EvalError::Posing { frame, source })
+            }
+            Weights::BestPosed { candidates } if candidates.len() != rest.len() => {
+                Err(EvalError::TemplateMismatch {
+                    method: self.method,
+                    weights: candidates.len(),
+                    vertices: rest.len(),
+                })
+            }
+            Weights::BestPosed { candidates } => {
+                bounds::best_posed_weights(capture, candidates, frame)
             }
             Weights::Net { model, path } => {
                 let mut dense = vec![0.0f32; rest.len() * model.joint_count()];

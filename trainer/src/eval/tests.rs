@@ -32,6 +32,7 @@ pub(super) fn root_only_skf(capture: &Capture, path: &Path) -> SkfModel {
         config,
         skeleton: capture.skeleton.clone(),
         tensors: Vec::new(),
+        candidates: None,
     };
     let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
     let last = shapes.len() - 1;

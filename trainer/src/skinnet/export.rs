@@ -40,6 +40,7 @@ pub fn to_skf_model(net: &SkinNet, skeleton: &Skeleton) -> Result<SkfModel, Expo
         config: *net.config(),
         skeleton: skeleton.clone(),
         tensors: Vec::new(),
+        candidates: None,
     };
     for (i, layer) in net.layers().iter().enumerate() {
         let w = layer.weight()?.to_dtype(candle_core::DType::F32)?;

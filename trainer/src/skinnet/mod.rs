@@ -181,6 +181,17 @@ impl SkinNet {
     /// and pose features `[F, 3J]`; rows sum to one. With [`Backend::Fused`] and f32 inputs the
     /// fused op computes it (other dtypes fall back to the candle graph).
     pub fn forward(&self, positions: &Tensor, poses: &Tensor) -> Result<Tensor> {
+        self.forward_masked(positions, poses, None)
+    }
+
+    /// [`SkinNet::forward`] with the softmax restricted to candidate joints: `mask` is `[V, J]`,
+    /// 0 where joint `j` is a candidate of vertex `v` and −∞ elsewhere ([`crate::candidates`]).
+    pub fn forward_masked(
+        &self,
+        positions: &Tensor,
+        poses: &Tensor,
+        mask: Option<&Tensor>,
+    ) -> Result<Tensor> {
         let (v, p) = positions.dims2()?;
         let (f, q) = poses.dims2()?;
         if p != self.config.position_width() || q != self.config.pose_width() {
@@ -192,7 +203,13 @@ impl SkinNet {
         }
         let activation = match self.backend {
             Backend::Fused if positions.dtype() == DType::F32 && poses.dtype() == DType::F32 => {
-                return fused::forward(&self.fused, &self.packed_parameters()?, positions, poses);
+                return fused::forward(
+                    &self.fused,
+                    &self.packed_parameters()?,
+                    positions,
+                    poses,
+                    mask,
+                );
             }
             Backend::Fused => Activation::SoftplusOp,
             Backend::Candle(a) => a,
@@ -229,7 +246,13 @@ impl SkinNet {
             h = Some(if i < n { act(&z)? } else { z });
         }
         let logits = h.ok_or_else(|| candle_core::Error::Msg("SkinNet has no layers".into()))?;
-        softmax_last(&logits)?.reshape((f, v, self.config.joint_count as usize))
+        let j = self.config.joint_count as usize;
+        let logits = logits.reshape((f, v, j))?;
+        let logits = match mask {
+            Some(m) => logits.broadcast_add(&m.to_dtype(logits.dtype())?.unsqueeze(0)?)?,
+            None => logits,
+        };
+        softmax_last(&logits)?.reshape((f, v, j))
     }
 }
 

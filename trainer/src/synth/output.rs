@@ -212,7 +212,7 @@ pub fn write_subject(
     writer.write_true_weights(subject.deformer.skin())?;
 
     subject.frames.par_iter().enumerate().try_for_each(
-        |(f, (_, split, pose))| -> Result<(), SynthError> {
+        |(f, (_, _, pose))| -> Result<(), SynthError> {
             let (positions, normals) = subject.deformer.deform(pose)?;
             let shadow = ShadowMap::build(
                 light.direction,
@@ -232,9 +232,8 @@ pub fn write_subject(
                 writer.write_image(c, f, &rgb)?;
                 writer.write_mask(c, f, &mask)?;
             }
-            if *split == Split::Test {
-                writer.write_gt_mesh(f, &positions)?;
-            }
+            // Every frame's ground truth (evaluation only: the bounds fit the training frames').
+            writer.write_gt_mesh(f, &positions)?;
             Ok(())
         },
     )?;

@@ -109,6 +109,10 @@ pub struct TrainConfig {
     /// (the largest side) instead of its bounding box, so the encoding's frequencies are the
     /// same along every axis.
     pub cubic_normalisation: bool,
+    /// Candidate joints per point ([`crate::candidates`]): SkinNet's (and the static
+    /// baseline's) softmax ranges over at most this many joints near each point, the rest
+    /// weigh exactly zero; 0 turns the restriction off.
+    pub candidate_joints: usize,
     /// Loss weights.
     pub weights: LossWeights,
     /// The Laplacian loss's reference shape.
@@ -166,6 +170,7 @@ impl Default for TrainConfig {
             static_lr: 1e-2,
             consistent_queries: true,
             cubic_normalisation: true,
+            candidate_joints: crate::candidates::DEFAULT_CANDIDATES,
             weights: LossWeights::default(),
             laplacian_reference: LaplacianReference::default(),
             skinning_r: crate::losses::skinning_reg::PAPER_R,
@@ -266,6 +271,9 @@ impl TrainConfig {
         }
         if !(self.static_lr.is_finite() && self.static_lr > 0.0) {
             return Err("static_lr");
+        }
+        if self.candidate_joints > skinfield_formats::skf::candidates::MAX_CANDIDATES {
+            return Err("candidate_joints");
         }
         if self.adam.clip.is_some_and(|c| !(c.is_finite() && c > 0.0)) {
             return Err("adam.clip");

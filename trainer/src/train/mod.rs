@@ -222,6 +222,8 @@ pub struct Trainer {
     triangles: Arc<[[u32; 3]]>,
     /// With [`TrainConfig::consistent_queries`]: the full-resolution rest positions `[N, 4]`.
     query_rest: Option<Tensor>,
+    /// The candidate joints and the masks they make ([`crate::candidates`]).
+    candidates: Option<Candidates>,
     /// The running average of the parameters over the image iterations.
     average: Option<average::ParameterAverage>,
     /// The last `warm_start_window` warm-start `(KL, relative position error)` pairs.
@@ -230,6 +232,84 @@ pub struct Trainer {
     warm_converged: bool,
     /// The template's bounding-box diagonal (the warm start's position scale).
     diagonal: f64,
+}
+
+/// The candidate joints of a run and the masks they make.
+struct Candidates {
+    /// Per training vertex, its candidate joints (ascending).
+    lists: Vec<Vec<u16>>,
+    /// Additive mask `[V, J]` of the training vertices (0 or −∞).
+    mask: Tensor,
+    /// Additive mask `[N, J]` of the full-resolution query points (their nearest training
+    /// vertex's list, the runtime's rule), or a copy of `mask` without query cells.
+    query_mask: Tensor,
+}
+
+impl Candidates {
+    /// The candidates of `data`'s training vertices ([`crate::candidates::candidate_sets`] with
+    /// `k` joints; `None` when `k` is 0), and the initial weights of `data` — the warm start's
+    /// target and the regularisers' reference — restricted to them and renormalised, since
+    /// weights outside the candidates cannot be represented.
+    fn new(data: &mut TrainData, k: usize) -> Option<Self> {
+        if k == 0 {
+            return None;
+        }
+        let j = data.skeleton.len();
+        let lists = crate::candidates::candidate_sets(&data.init_weights, &data.skeleton, k);
+        restrict(&mut data.init_weights, j, &lists, |i| i);
+        let mask_values = crate::candidates::additive_mask(&lists, j);
+        let v = lists.len();
+        let mask = Tensor::from_vec(mask_values.clone(), (v, j), &Device::Cpu).ok()?;
+        let query_mask = match &mut data.queries {
+            Some(q) => {
+                let anchor = skinfield_runtime::candidates::nearest_anchors(
+                    &data.template.positions,
+                    &q.positions,
+                );
+                restrict(&mut q.init_weights, j, &lists, |i| anchor[i] as usize);
+                let rows: Vec<f32> = anchor
+                    .iter()
+                    .flat_map(|&a| {
+                        mask_values[a as usize * j..(a as usize + 1) * j]
+                            .iter()
+                            .copied()
+                    })
+                    .collect();
+                Tensor::from_vec(rows, (anchor.len(), j), &Device::Cpu).ok()?
+            }
+            None => mask.clone(),
+        };
+        Some(Self {
+            lists,
+            mask,
+            query_mask,
+        })
+    }
+}
+
+/// Zeroes each row's weights outside `lists[list_of(row)]` and renormalises the row (a row
+/// left with no weight gets its candidates' uniform blend).
+fn restrict(weights: &mut [f32], j: usize, lists: &[Vec<u16>], list_of: impl Fn(usize) -> usize) {
+    for (i, row) in weights.chunks_mut(j.max(1)).enumerate() {
+        let list = &lists[list_of(i)];
+        let mut keep = vec![false; j];
+        for &c in list {
+            keep[c as usize] = true;
+        }
+        for (w, k) in row.iter_mut().zip(&keep) {
+            if !k {
+                *w = 0.0;
+            }
+        }
+        let sum: f32 = row.iter().sum();
+        if sum > 0.0 {
+            row.iter_mut().for_each(|w| *w /= sum);
+        } else {
+            for &c in list {
+                row[c as usize] = 1.0 / list.len() as f32;
+            }
+        }
+    }
 }
 
 /// Frame-sampling stream of the warm start (its batches have `warm_start_batch` frames).
@@ -261,7 +341,7 @@ impl Trainer {
     /// penalty, rigid mask) and initialises the model from `config.seed`. `static_weights`
     /// selects the baseline, whose logits start at `ln(w_init + config.static_epsilon)`.
     pub fn new(
-        data: TrainData,
+        mut data: TrainData,
         config: TrainConfig,
         static_weights: bool,
     ) -> Result<Self, TrainError> {
@@ -288,6 +368,19 @@ impl Trainer {
                 )));
             }
         }
+        if let Some(q) = &data.queries
+            && (q.training_vertex_count() != v || q.init_weights.len() != q.positions.len() * j)
+        {
+            return Err(TrainError::Data(format!(
+                "queries: {} cells and {} initial weights for {v} training vertices and {} \
+                 query points × {j} joints",
+                q.training_vertex_count(),
+                q.init_weights.len(),
+                q.positions.len()
+            )));
+        }
+        let candidates = Candidates::new(&mut data, config.candidate_joints);
+        let t = &data.template;
         let dev = Device::Cpu;
         let bounds = t
             .bounds()
@@ -358,15 +451,6 @@ impl Trainer {
         let init_entropy = mean_neg_entropy(&data.init_weights, v);
         let query_init = match &data.queries {
             Some(q) if !static_weights => {
-                if q.training_vertex_count() != v || q.init_weights.len() != q.positions.len() * j {
-                    return Err(TrainError::Data(format!(
-                        "queries: {} cells and {} initial weights for {v} training vertices and \
-                         {} query points × {j} joints",
-                        q.training_vertex_count(),
-                        q.init_weights.len(),
-                        q.positions.len()
-                    )));
-                }
                 let n = q.positions.len();
                 Some(Tensor::from_vec(q.init_weights.clone(), (n, j), &dev)?)
             }
@@ -399,6 +483,7 @@ impl Trainer {
             edges,
             triangles,
             query_rest,
+            candidates,
             average: None,
             warm_window: std::collections::VecDeque::new(),
             warm_converged: false,
@@ -516,11 +601,28 @@ impl Trainer {
     /// The static baseline's weights `[V, J]` (`None` for SkinNet).
     pub fn static_weights(&self) -> Result<Option<Vec<f32>>, TrainError> {
         match &self.model {
-            Model::Static { logits } => Ok(Some(
-                softmax_last(logits.as_tensor())?.flatten_all()?.to_vec1()?,
-            )),
+            Model::Static { .. } => Ok(Some(self.weights(&[0])?.flatten_all()?.to_vec1()?)),
             Model::Net { .. } => Ok(None),
         }
+    }
+
+    /// The anchors and candidate joints to store in the exported `.skf` (the training template's
+    /// vertices and their lists), or `None` when candidates are off.
+    #[must_use]
+    pub fn export_candidates(&self) -> Option<skinfield_formats::skf::Candidates> {
+        self.candidates
+            .as_ref()
+            .map(|c| skinfield_formats::skf::Candidates {
+                positions: self
+                    .data
+                    .template
+                    .positions
+                    .iter()
+                    .map(|p| p.to_array())
+                    .collect(),
+                lists: c.lists.clone(),
+                k: self.config.candidate_joints,
+            })
     }
 
     /// The configuration.
@@ -554,17 +656,31 @@ impl Trainer {
                     .iter()
                     .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
                     .collect();
-                let rows = match (query, query_encoded) {
-                    (Some(q), Some(points)) => points.index_select(q, 0)?,
-                    _ => encoded.clone(),
+                let (rows, mask) = match (query, query_encoded) {
+                    (Some(q), Some(points)) => (
+                        points.index_select(q, 0)?,
+                        self.candidates
+                            .as_ref()
+                            .map(|c| c.query_mask.index_select(q, 0))
+                            .transpose()?,
+                    ),
+                    _ => (
+                        encoded.clone(),
+                        self.candidates.as_ref().map(|c| c.mask.clone()),
+                    ),
                 };
-                net.forward(
+                net.forward_masked(
                     &rows,
                     &Tensor::from_vec(poses, (frames.len(), 3 * j), &Device::Cpu)?,
+                    mask.as_ref(),
                 )?
             }
             Model::Static { logits } => {
-                let w = softmax_last(logits.as_tensor())?;
+                let logits = match &self.candidates {
+                    Some(c) => logits.as_tensor().broadcast_add(&c.mask)?,
+                    None => logits.as_tensor().clone(),
+                };
+                let w = softmax_last(&logits)?;
                 let (v, _) = w.dims2()?;
                 w.unsqueeze(0)?
                     .broadcast_as((frames.len(), v, j))?

@@ -538,3 +538,182 @@ fn queries_pose_their_own_rest_positions_and_the_box_is_a_cube() {
         assert!((side[0] - side[1]).abs() < 1e-6 && (side[1] - side[2]).abs() < 1e-6);
     }
 }
+
+/// A finger: a thin tube (radius 2 cm, 1.5 m long) along +Y with a chain of `joints` joints,
+/// initial weights blending each ring between its two nearest joints, and frames curling the
+/// chain; the silhouettes are those of the initial skinning itself.
+fn finger_scene(joints: usize, frames: usize) -> TrainData {
+    let (around, per_segment) = (8usize, 3usize);
+    let rings = (joints - 1) * per_segment + 1;
+    let len = 1.5f32;
+    let radius = 0.02f32;
+    let mut positions = Vec::new();
+    for r in 0..rings {
+        let y = len * r as f32 / (rings - 1) as f32;
+        for a in 0..around {
+            let t = a as f32 / around as f32 * core::f32::consts::TAU;
+            positions.push(Vec3::new(radius * t.cos(), y, radius * t.sin()));
+        }
+    }
+    let mut triangles = Vec::new();
+    for r in 0..rings - 1 {
+        for a in 0..around {
+            let i = (r * around + a) as u32;
+            let j = (r * around + (a + 1) % around) as u32;
+            let (k, l) = (i + around as u32, j + around as u32);
+            triangles.push([i, k, j]);
+            triangles.push([j, k, l]);
+        }
+    }
+    let mut template = Template {
+        positions,
+        triangles,
+        ..Default::default()
+    };
+    template.compute_normals();
+    let step = len / (joints - 1) as f32;
+    let skeleton = Skeleton::new(
+        (0..joints).map(|i| format!("j{i}")).collect(),
+        (0..joints).map(|i| i.checked_sub(1)).collect(),
+        (0..joints)
+            .map(|i| {
+                Transform::from_translation(Vec3::new(0.0, if i == 0 { 0.0 } else { step }, 0.0))
+            })
+            .collect(),
+        None,
+        None,
+        Mat4::IDENTITY,
+    )
+    .unwrap();
+    let init: Vec<f32> = template
+        .positions
+        .iter()
+        .flat_map(|p| {
+            let s = (p.y / step).min((joints - 1) as f32 - 1e-4);
+            let (k, f) = (s.floor() as usize, s.fract());
+            (0..joints).map(move |j| {
+                if j == k {
+                    1.0 - f
+                } else if j == k + 1 {
+                    f
+                } else {
+                    0.0
+                }
+            })
+        })
+        .collect();
+    let camera = Camera::look_at(
+        "front",
+        96,
+        96,
+        1.4,
+        Vec3::new(0.0, 0.75, 2.2),
+        Vec3::new(0.0, 0.6, 0.0),
+        Vec3::Y,
+    );
+    let frames = (0..frames)
+        .map(|f| {
+            let mut pose = skeleton.bind_pose();
+            for j in 1..joints {
+                let a = [0.25f32, -0.2, 0.3, 0.15][(f + j) % 4];
+                pose.locals[j].rotation = Quat::from_rotation_z(a);
+            }
+            let mut skinning = vec![Mat4::IDENTITY; joints];
+            skeleton.skinning_matrices(&pose, &mut skinning).unwrap();
+            let mut feats = vec![0.0; 3 * joints];
+            pose_features(&skeleton, &pose, UpAxis::Y, &mut feats).unwrap();
+            let posed: Vec<Vec3> = template
+                .positions
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    (0..joints)
+                        .map(|j| (skinning[j] * p.extend(1.0)).truncate() * init[i * joints + j])
+                        .sum()
+                })
+                .collect();
+            let cover = crate::raster::coverage(&camera, &posed, &template.triangles, 4);
+            Frame {
+                skinning,
+                pose_features: feats,
+                views: vec![View {
+                    camera: camera.clone(),
+                    target: SilhouetteTarget::from_coverage(96, 96, &cover).unwrap(),
+                }],
+            }
+        })
+        .collect();
+    TrainData {
+        skeleton,
+        template,
+        init_weights: init,
+        frames,
+        queries: None,
+    }
+}
+
+#[test]
+fn candidate_joints_make_far_joint_spikes_impossible() {
+    let joints = 16;
+    let data = finger_scene(joints, 4);
+    // A short warm start and a high rate: the unconstrained net leaks weight onto far joints.
+    let train = |candidate_joints: usize| {
+        let cfg = TrainConfig {
+            warm_start_iterations: 15,
+            warm_start_kl_tolerance: 0.0,
+            iterations: 15,
+            batch: 2,
+            lr_warmup: 0,
+            candidate_joints,
+            adam: crate::optim::AdamConfig {
+                lr: 3e-2,
+                ..Default::default()
+            },
+            ..config()
+        };
+        let mut t = Trainer::new(data.clone(), cfg, false).unwrap();
+        t.run(&tempfile::tempdir().unwrap().path().join("f"), false)
+            .unwrap();
+        // The largest distance (over vertices and training frames) between a vertex skinned
+        // with the learned weights and with the initial ones.
+        let w = t.weights(&[0, 1, 2, 3]).unwrap().to_vec3::<f32>().unwrap();
+        let mut worst = 0.0f32;
+        let mut far_mass = 0.0f32;
+        for (f, frame) in data.frames.iter().enumerate() {
+            for (i, p) in data.template.positions.iter().enumerate() {
+                let posed = |wt: &dyn Fn(usize) -> f32| -> Vec3 {
+                    (0..joints)
+                        .map(|j| (frame.skinning[j] * p.extend(1.0)).truncate() * wt(j))
+                        .sum()
+                };
+                let learned = posed(&|j| w[f][i][j]);
+                let initial = posed(&|j| data.init_weights[i * joints + j]);
+                worst = worst.max((learned - initial).length());
+                let near = |j: usize| {
+                    (0..joints)
+                        .any(|k| data.init_weights[i * joints + k] > 0.0 && k.abs_diff(j) <= 2)
+                };
+                far_mass =
+                    far_mass.max((0..joints).filter(|&j| !near(j)).map(|j| w[f][i][j]).sum());
+            }
+        }
+        (worst, far_mass)
+    };
+    let (free, free_far) = train(0);
+    let (local, local_far) = train(crate::candidates::DEFAULT_CANDIDATES);
+    eprintln!(
+        "unconstrained: worst {free} m, far mass {free_far}; candidates: worst {local} m, far mass {local_far}"
+    );
+    assert_eq!(
+        local_far, 0.0,
+        "a candidate-masked vertex took weight from a far joint"
+    );
+    assert!(
+        free_far > 0.01,
+        "the unconstrained net did not leak ({free_far}): the test shows nothing"
+    );
+    assert!(
+        free > 3.0 * local,
+        "spike {free} m unconstrained vs {local} m with candidates"
+    );
+}

@@ -161,9 +161,11 @@ impl FusedContext {
     }
 }
 
-/// The custom op: `(params [P], positions [V, Pw], poses [F, Qw]) → weights [F, V, J]`.
+/// The custom op: `(params [P], positions [V, Pw], poses [F, Qw]) → weights [F, V, J]`, with an
+/// optional additive mask `[V, J]` (0 on candidate joints, −∞ elsewhere) applied to the logits.
 struct FusedSkinNet {
     context: Arc<FusedContext>,
+    mask: Option<Vec<f32>>,
     saved: Mutex<Option<Activations>>,
 }
 
@@ -225,7 +227,14 @@ impl CustomOp3 for FusedSkinNet {
                 ctx.config.pose_width()
             );
         }
-        let acts = pass::forward(ctx, params, positions, poses, f, v)?;
+        if self
+            .mask
+            .as_ref()
+            .is_some_and(|m| m.len() != v * ctx.config.joint_count as usize)
+        {
+            bail!("fused SkinNet: the mask is not [V, J]");
+        }
+        let acts = pass::forward(ctx, params, positions, poses, self.mask.as_deref(), f, v)?;
         let weights = acts.output().to_vec();
         *self
             .saved
@@ -260,6 +269,7 @@ impl CustomOp3 for FusedSkinNet {
                     &params_v,
                     &positions.flatten_all()?.to_vec1::<f32>()?,
                     &poses.flatten_all()?.to_vec1::<f32>()?,
+                    self.mask.as_deref(),
                     f,
                     v,
                 )?
@@ -282,18 +292,29 @@ impl CustomOp3 for FusedSkinNet {
 }
 
 /// SkinNet's weights `[F, V, J]` by the fused op: `params` is the flat parameter vector in
-/// [`ParamLayout`] order (differentiable), `positions` `[V, P]` and `poses` `[F, Q]` constants.
+/// [`ParamLayout`] order (differentiable), `positions` `[V, P]` and `poses` `[F, Q]` constants,
+/// `mask` an optional additive `[V, J]` mask of the logits (0 or −∞).
 pub(crate) fn forward(
     context: &Arc<FusedContext>,
     params: &Tensor,
     positions: &Tensor,
     poses: &Tensor,
+    mask: Option<&Tensor>,
 ) -> Result<Tensor> {
+    let mask = match mask {
+        Some(m) => Some(
+            m.to_dtype(candle_core::DType::F32)?
+                .flatten_all()?
+                .to_vec1::<f32>()?,
+        ),
+        None => None,
+    };
     params.apply_op3(
         &positions.contiguous()?,
         &poses.contiguous()?,
         FusedSkinNet {
             context: context.clone(),
+            mask,
             saved: Mutex::new(None),
         },
     )

@@ -176,6 +176,7 @@ pub(crate) fn forward(
     params: &[f32],
     positions: &[f32],
     poses: &[f32],
+    mask: Option<&[f32]>,
     frames: usize,
     vertices: usize,
 ) -> Result<Activations> {
@@ -231,6 +232,15 @@ pub(crate) fn forward(
             hidden.push(z);
             slopes.push(s);
         } else {
+            if let Some(mask) = mask {
+                // Non-candidate logits become −∞: their weights are exactly 0 and their
+                // gradients too (the softmax's backward multiplies by the weight).
+                z.par_chunks_mut(vertices * out).for_each(|frame_rows| {
+                    for (z, m) in frame_rows.iter_mut().zip(mask) {
+                        *z += m;
+                    }
+                });
+            }
             softmax_rows(&mut z, out);
             output = z;
         }

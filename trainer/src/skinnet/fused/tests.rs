@@ -70,6 +70,18 @@ fn check_against_candle(
     points: usize,
     seed: u64,
 ) {
+    check_masked(config, vars, frames, points, seed, None);
+}
+
+/// [`check_against_candle`] with an optional additive mask `[points, J]` on the logits.
+fn check_masked(
+    config: ModelConfig,
+    vars: &VarMap,
+    frames: usize,
+    points: usize,
+    seed: u64,
+    mask: Option<&Tensor>,
+) {
     let dev = Device::Cpu;
     let enc = encode_positions(&config, &random_points(points, seed), &dev).unwrap();
     let q = config.pose_width();
@@ -84,21 +96,31 @@ fn check_against_candle(
     .unwrap();
 
     let (fused, fused_vars) = copy_net(config, vars, DType::F32);
-    let w_fused = fused.forward(&enc, &poses).unwrap();
+    let w_fused = fused.forward_masked(&enc, &poses, mask).unwrap();
     let g_fused = loss(&w_fused, &target).backward().unwrap();
 
     let (reference, ref_vars) = copy_net(config, vars, DType::F64);
     let reference = reference.with_backend(Backend::Candle(Activation::Composite));
     let w_ref = reference
-        .forward(
+        .forward_masked(
             &enc.to_dtype(DType::F64).unwrap(),
             &poses.to_dtype(DType::F64).unwrap(),
+            mask,
         )
         .unwrap();
     let g_ref = loss(&w_ref, &target).backward().unwrap();
 
     let a = w_fused.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     let b = w_ref.flatten_all().unwrap().to_vec1::<f64>().unwrap();
+    if let Some(m) = mask {
+        // Masked joints weigh exactly zero, every frame.
+        let m = m.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        for (i, w) in a.iter().enumerate() {
+            if m[i % m.len()] == f32::NEG_INFINITY {
+                assert_eq!(*w, 0.0, "masked weight {i}");
+            }
+        }
+    }
     let worst = a
         .iter()
         .zip(&b)
@@ -159,6 +181,34 @@ fn gradients_equal_candle_on_random_nets() {
     for (k, config) in [paper, narrow, no_skip].into_iter().enumerate() {
         check_against_candle(config, &seeded_vars(config, 10 + k as u64), 3, 37, k as u64);
     }
+}
+
+#[test]
+fn masked_gradients_equal_candle() {
+    // Each point keeps 1–4 of 7 joints (a seeded pattern), as candidate masks do.
+    let config = ModelConfig::vinecs(7, [-1.0; 3], [1.0; 3]);
+    let points = 29;
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let lists: Vec<Vec<u16>> = (0..points)
+        .map(|_| {
+            let n = rng.random_range(1..=4);
+            let mut l: Vec<u16> = (0..7).collect();
+            for i in 0..n {
+                let k = rng.random_range(i..7);
+                l.swap(i, k);
+            }
+            let mut l = l[..n].to_vec();
+            l.sort_unstable();
+            l
+        })
+        .collect();
+    let mask = Tensor::from_vec(
+        crate::candidates::additive_mask(&lists, 7),
+        (points, 7),
+        &Device::Cpu,
+    )
+    .unwrap();
+    check_masked(config, &seeded_vars(config, 33), 3, points, 8, Some(&mask));
 }
 
 #[test]
