@@ -28,7 +28,9 @@ fn reference_positions(r: &Reference, worlds: &[glam::DMat4]) -> Vec<DVec3> {
         };
         for p in mesh.primitives() {
             let positions = p.reader(data).read_positions().unwrap();
-            out.extend(positions.map(|v| worlds[node.index()].transform_point3(Vec3::from(v).as_dvec3())));
+            out.extend(
+                positions.map(|v| worlds[node.index()].transform_point3(Vec3::from(v).as_dvec3())),
+            );
         }
     }
     out

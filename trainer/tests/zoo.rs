@@ -20,7 +20,9 @@ fn zoo(args: &[&str]) -> (i32, String) {
 
 #[test]
 fn zoo_writes_one_table_with_the_robot() {
-    let Some(data) = shared_data_dir() else { return };
+    let Some(data) = shared_data_dir() else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("zoo");
     let doc = tmp.path().join("docs/zoo.md");
@@ -83,7 +85,9 @@ fn zoo_writes_one_table_with_the_robot() {
     let md = std::fs::read_to_string(out.join("zoo.md")).unwrap();
     assert_eq!(std::fs::read_to_string(&doc).unwrap(), md);
     assert!(doc.with_extension("json").is_file());
-    assert!(md.contains("| **robot** (threejs-robotexpressive/RobotExpressive.glb) | 43 | 7,214 |"));
+    assert!(
+        md.contains("| **robot** (threejs-robotexpressive/RobotExpressive.glb) | 43 | 7,214 |")
+    );
     assert!(md.contains("novel: Wave, ThumbsUp, Jump (3 frames)"));
     assert!(md.contains("Chamfer (% of size)") && md.contains("| oracle |"));
 }
@@ -94,7 +98,10 @@ fn zoo_refuses_unknown_characters_and_reports_missing_files() {
     let out = tmp.path().join("zoo");
     let (code, err) = zoo(&["--out", out.to_str().unwrap(), "--characters", "dragon"]);
     assert_eq!(code, 1);
-    assert!(err.contains("dragon") && err.contains("builtin, cesiumman, fox, robot, witch"), "{err}");
+    assert!(
+        err.contains("dragon") && err.contains("builtin, cesiumman, fox, robot, witch"),
+        "{err}"
+    );
     // A missing asset: the table still gets the character's row, with the reason, and the
     // command fails.
     let (code, err) = zoo(&[
@@ -109,5 +116,8 @@ fn zoo_refuses_unknown_characters_and_reports_missing_files() {
     assert_eq!(code, 1);
     assert!(err.contains("Fox.glb not found"), "{err}");
     let md = std::fs::read_to_string(out.join("zoo.md")).unwrap();
-    assert!(md.contains("| fox |") && md.contains("Fox.glb not found"), "{md}");
+    assert!(
+        md.contains("| fox |") && md.contains("Fox.glb not found"),
+        "{md}"
+    );
 }

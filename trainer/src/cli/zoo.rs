@@ -282,7 +282,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => TrainConfig::default(),
     };
     config.seed = args.seed;
-    let quick = |given: Option<u64>, default: u64| given.unwrap_or(if args.quick { 30 } else { default });
+    let quick =
+        |given: Option<u64>, default: u64| given.unwrap_or(if args.quick { 30 } else { default });
     config.warm_start_iterations = quick(args.warm_start, config.warm_start_iterations);
     config.iterations = quick(args.iterations, config.iterations);
     let budget = Budget {
@@ -308,7 +309,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         results.push(result);
         // Written after every character, so an interrupted run keeps what it measured.
-        write_tables(&args, &command, &budget, &results, total.elapsed().as_secs_f64())?;
+        write_tables(
+            &args,
+            &command,
+            &budget,
+            &results,
+            total.elapsed().as_secs_f64(),
+        )?;
     }
     let failed: Vec<String> = results
         .iter()
@@ -393,7 +400,10 @@ fn run_character(
             BUILT_IN_TRAIN.to_string(),
             format!("novel: {BUILT_IN_TEST}"),
         ),
-        TestSplit::Clips(clips) => (character.train.join(", "), format!("novel: {}", clips.join(", "))),
+        TestSplit::Clips(clips) => (
+            character.train.join(", "),
+            format!("novel: {}", clips.join(", ")),
+        ),
         TestSplit::HeldOutPhases => (
             character.train.join(", "),
             "held-out phases of the training clip".to_string(),
@@ -451,7 +461,10 @@ fn fill_character(
         (Some(file), test) => {
             let path = data.join(file);
             if !path.is_file() {
-                bail!("{} not found (set --data or SKINFIELD_SHARED_DATA)", path.display());
+                bail!(
+                    "{} not found (set --data or SKINFIELD_SHARED_DATA)",
+                    path.display()
+                );
             }
             let source = GltfSource {
                 character: path,
@@ -557,7 +570,7 @@ fn thousands(n: usize) -> String {
     let s = n.to_string();
     let mut out = String::new();
     for (i, c) in s.chars().enumerate() {
-        if i > 0 && (s.len() - i) % 3 == 0 {
+        if i > 0 && (s.len() - i).is_multiple_of(3) {
             out.push(',');
         }
         out.push(c);
@@ -616,7 +629,13 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     for r in results {
-        let count = |n: usize| if n == 0 { "–".to_string() } else { thousands(n) };
+        let count = |n: usize| {
+            if n == 0 {
+                "–".to_string()
+            } else {
+                thousands(n)
+            }
+        };
         let head = format!(
             "| **{}** ({}) | {} | {} | {:.3} | {} | {} ({} frames) ",
             r.name,
@@ -629,10 +648,7 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
             r.frames.1
         );
         if r.rows.is_empty() {
-            let _ = writeln!(
-                md,
-                "{head}| – | – | – | – | – | – | – | – |"
-            );
+            let _ = writeln!(md, "{head}| – | – | – | – | – | – | – | – |");
         }
         for (i, row) in r.rows.iter().enumerate() {
             let lead = if i == 0 {

@@ -77,7 +77,7 @@ pub use posing::{Blend, PosingError, pose_static};
 pub use static_weights::{StaticWeightsError, read_static_weights, write_static_weights};
 pub use surface::{DEFAULT_SAMPLES, Surface, SurfaceError, SurfaceMetrics, surface_metrics};
 pub use table::{
-    FrameRow, WorstVertexCheck, EvalRow, rows_from_json, rows_to_json, rows_to_table,
+    EvalRow, FrameRow, WorstVertexCheck, rows_from_json, rows_to_json, rows_to_table,
     worst_vertex_check,
 };
 

@@ -217,9 +217,13 @@ mod tests {
         assert_eq!(v["rows"].as_array().unwrap().len(), 2);
         assert_eq!(rows_from_json(&text).unwrap(), rows());
         // A file written before the relative and per-frame fields existed still parses.
-        let old = r#"{"rows":[{"method":"ours","chamfer_cm":1.0,"m2s_cm":0.5,"s2m_cm":0.5,"frames":3}]}"#;
+        let old =
+            r#"{"rows":[{"method":"ours","chamfer_cm":1.0,"m2s_cm":0.5,"s2m_cm":0.5,"frames":3}]}"#;
         let r = rows_from_json(old).unwrap();
-        assert_eq!((r[0].frames, r[0].max_vertex_cm, r[0].per_frame.len()), (3, None, 0));
+        assert_eq!(
+            (r[0].frames, r[0].max_vertex_cm, r[0].per_frame.len()),
+            (3, None, 0)
+        );
     }
 
     #[test]
@@ -247,7 +251,10 @@ mod tests {
         assert!(worst_vertex_check(&candidate, &reference).unwrap().passed());
         candidate.per_frame[1].max_vertex_cm = Some(2.5);
         let check = worst_vertex_check(&candidate, &reference).unwrap();
-        assert_eq!((check.frames, check.failures.clone()), (2, vec![(9, 2.5, 2.0)]));
+        assert_eq!(
+            (check.frames, check.failures.clone()),
+            (2, vec![(9, 2.5, 2.0)])
+        );
         assert!(!check.passed());
         // Rows on other frames, or without per-vertex figures, cannot be compared.
         candidate.per_frame[1].frame = 10;

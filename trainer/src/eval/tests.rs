@@ -282,7 +282,10 @@ fn worst_vertex_and_relative_figures_follow_a_known_shift() {
     let lo = p.iter().fold(Vec3::splat(f32::MAX), |a, b| a.min(*b));
     let hi = p.iter().fold(Vec3::splat(f32::MIN), |a, b| a.max(*b));
     let size = character_size(&capture.template);
-    assert!((size - f64::from((hi - lo).length())).abs() < 1e-6, "{size}");
+    assert!(
+        (size - f64::from((hi - lo).length())).abs() < 1e-6,
+        "{size}"
+    );
     let row = average("shifted", &frames, size);
     // Percent of the size: Chamfer (cm → model units ÷ 100) / size × 100.
     assert!((row.chamfer_pct - row.chamfer_cm / 100.0 / size * 100.0).abs() < 1e-9);

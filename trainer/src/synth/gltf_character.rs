@@ -123,7 +123,10 @@ fn config_error(reason: String) -> SynthError {
 /// or recomputed from the mapped triangles where the file's are missing or degenerate.
 fn mapped_normals(part: &Template, positions: &[Vec3], linear: Mat3) -> Vec<Vec3> {
     let usable = part.normals.len() == part.positions.len()
-        && part.normals.iter().all(|n| n.is_finite() && n.length() > 0.5);
+        && part
+            .normals
+            .iter()
+            .all(|n| n.is_finite() && n.length() > 0.5);
     if !usable {
         return area_weighted_normals(positions, &part.triangles);
     }
@@ -196,13 +199,19 @@ fn slice_template(t: &Template, first: usize, count: usize, triangles: (usize, u
     let tri = &t.triangles[triangles.0..triangles.0 + triangles.1];
     Template {
         positions: t.positions[range.clone()].to_vec(),
-        normals: t.normals.get(range.clone()).map_or_else(Vec::new, <[Vec3]>::to_vec),
-        triangles: tri
-            .iter()
-            .map(|tr| tr.map(|i| i - first as u32))
-            .collect(),
-        uvs: t.uvs.as_ref().and_then(|u| u.get(range.clone()).map(<[_]>::to_vec)),
-        colors: t.colors.as_ref().and_then(|c| c.get(range).map(<[_]>::to_vec)),
+        normals: t
+            .normals
+            .get(range.clone())
+            .map_or_else(Vec::new, <[Vec3]>::to_vec),
+        triangles: tri.iter().map(|tr| tr.map(|i| i - first as u32)).collect(),
+        uvs: t
+            .uvs
+            .as_ref()
+            .and_then(|u| u.get(range.clone()).map(<[_]>::to_vec)),
+        colors: t
+            .colors
+            .as_ref()
+            .and_then(|c| c.get(range).map(<[_]>::to_vec)),
         part_labels: None,
     }
 }
@@ -271,9 +280,9 @@ fn rebind(skin: &GltfSkin, rest: DMat4) -> Result<Skeleton, SynthError> {
 
 /// Builds the character of `doc` around its largest skin (see the module docs).
 pub fn assemble(doc: &GltfDocument) -> Result<GltfCharacter, SynthError> {
-    let main = doc.largest_skin().ok_or_else(|| {
-        config_error(format!("{} has no skin", doc.source.display()))
-    })?;
+    let main = doc
+        .largest_skin()
+        .ok_or_else(|| config_error(format!("{} has no skin", doc.source.display())))?;
     let sk = &main.skeleton;
     let mut rest_world = vec![Mat4::IDENTITY; sk.len()];
     sk.world_matrices(&main.default_pose(), &mut rest_world)?;
@@ -389,16 +398,19 @@ pub fn assemble(doc: &GltfDocument) -> Result<GltfCharacter, SynthError> {
             continue;
         }
         // Node space → the joint's space at rest → the joint's bind pose in the canonical space.
-        let to_rest = bind_world[joint]
-            * rest_world[joint].as_dmat4().inverse()
-            * mesh.world.as_dmat4();
+        let to_rest =
+            bind_world[joint] * rest_world[joint].as_dmat4().inverse() * mesh.world.as_dmat4();
         let positions: Vec<Vec3> = mesh
             .template
             .positions
             .iter()
             .map(|p| to_rest.transform_point3(p.as_dvec3()).as_vec3())
             .collect();
-        let normals = mapped_normals(&mesh.template, &positions, Mat3::from_mat4(to_rest.as_mat4()));
+        let normals = mapped_normals(
+            &mesh.template,
+            &positions,
+            Mat3::from_mat4(to_rest.as_mat4()),
+        );
         parts.push(CharacterPart {
             source: PartSource::Rigid {
                 node: mesh.node,

@@ -17,16 +17,16 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
-use skinfield_formats::gltf_io::{GltfDocument, load_gltf};
 use rayon::prelude::*;
+use skinfield_formats::gltf_io::{GltfDocument, load_gltf};
 use skinfield_formats::mesh::area_weighted_normals;
 use skinfield_formats::{Aabb, Pose};
 
 use super::body::Part;
 use super::deform::GroundTruthDeformer;
+use super::gltf_character::assemble;
 use super::motion::Split;
 use super::output::{Subject, SynthSummary, write_subject};
-use super::gltf_character::assemble;
 use super::rig::{Framing, camera_rig_framed};
 use super::texture::value_noise;
 use super::{SynthConfig, SynthError, TestMotions};
@@ -196,11 +196,15 @@ pub fn synthesize_gltf(
         for (k, part) in character.parts.iter().enumerate() {
             let base = PALETTE[part.material.unwrap_or(k) % PALETTE.len()];
             let end = (part.first_vertex + part.vertex_count).min(colors.len());
-            for v in part.first_vertex..end {
-                let p = (template.positions[v] - bounds.min) / height;
+            let start = part.first_vertex.min(end);
+            for (colour, &position) in colors[start..end]
+                .iter_mut()
+                .zip(&template.positions[start..end])
+            {
+                let p = (position - bounds.min) / height;
                 let stripe = 0.85 + 0.15 * (std::f32::consts::TAU * p.y * 14.0).sin();
                 let noise = 0.8 + 0.4 * value_noise(p, 0.03, config.seed);
-                colors[v] = (base * stripe * noise).clamp(Vec3::ZERO, Vec3::ONE);
+                *colour = (base * stripe * noise).clamp(Vec3::ZERO, Vec3::ONE);
             }
         }
         template.colors = Some(colors);

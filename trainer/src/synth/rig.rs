@@ -49,13 +49,7 @@ impl Framing {
     /// the same framing as a 0.79 m one, 100 times smaller. An empty box (a single point) gets
     /// a rig a thousandth of the reference.
     #[must_use]
-    pub fn around(
-        bounds: &Aabb,
-        count: usize,
-        width: u32,
-        height: u32,
-        seed: u64,
-    ) -> Self {
+    pub fn around(bounds: &Aabb, count: usize, width: u32, height: u32, seed: u64) -> Self {
         let target = bounds.center();
         let half = bounds.size() * 0.5;
         // The unit rig: cameras at scale 1 around the origin. Scaling the rig keeps every view

@@ -439,7 +439,7 @@ fn assert_masks_framed(cap: &skinfield_formats::capture::Capture, min_span: f32)
             let (mut x0, mut x1, mut y0, mut y1) = (w, 0, h, 0);
             for y in 0..h {
                 for x in 0..w {
-                    if mask.inside[y * w + x] {
+                    if mask.coverage[y * w + x] > 0.0 {
                         assert!(
                             x > 0 && y > 0 && x + 1 < w && y + 1 < h,
                             "frame {f}, camera {c}: the subject touches the border"
@@ -451,7 +451,10 @@ fn assert_masks_framed(cap: &skinfield_formats::capture::Capture, min_span: f32)
             assert!(x1 >= x0, "frame {f}, camera {c}: empty mask");
             span = span.max(((x1 - x0) as f32 / w as f32).max((y1 - y0) as f32 / h as f32));
         }
-        assert!(span >= min_span, "frame {f}: the subject spans only {span} of the image");
+        assert!(
+            span >= min_span,
+            "frame {f}: the subject spans only {span} of the image"
+        );
     }
 }
 
@@ -479,7 +482,10 @@ fn fox_capture_frames_the_quadruped() {
     synthesize_gltf(dir.path(), &config, &source).unwrap();
     let cap = load_capture(dir.path()).unwrap();
     let size = cap.template.bounds().unwrap().size();
-    assert!(size.max_element() > 100.0, "the Fox is in its own units: {size}");
+    assert!(
+        size.max_element() > 100.0,
+        "the Fox is in its own units: {size}"
+    );
     assert_masks_framed(&cap, 0.5);
     for &f in &cap.test_frames {
         let gt = cap.evaluation_gt_mesh(f).unwrap();
@@ -539,7 +545,11 @@ fn gltf_held_out_phases_test_the_training_clip_between_its_frames() {
         assert_eq!(got, want, "frame {f}");
     }
     for &t in &cap.test_frames {
-        assert!(cap.train_frames.iter().all(|&f| cap.poses[f] != cap.poses[t]));
+        assert!(
+            cap.train_frames
+                .iter()
+                .all(|&f| cap.poses[f] != cap.poses[t])
+        );
     }
     // Test clips are refused with held-out phases, and too many test frames per clip too.
     let named = GltfSource {
