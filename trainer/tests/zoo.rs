@@ -27,11 +27,15 @@ fn zoo_writes_one_table_with_the_robot() {
     let out = tmp.path().join("zoo");
     let doc = tmp.path().join("docs/zoo.md");
     std::fs::create_dir_all(doc.parent().unwrap()).unwrap();
+    let config = tmp.path().join("config.json");
+    std::fs::write(&config, r#"{"weights": {"skinning": 0, "partwise": 0}}"#).unwrap();
     let (code, err) = zoo(&[
         "--out",
         out.to_str().unwrap(),
         "--doc",
         doc.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
         "--data",
         data.to_str().unwrap(),
         "--characters",
@@ -90,6 +94,18 @@ fn zoo_writes_one_table_with_the_robot() {
     );
     assert!(md.contains("novel: Wave, ThumbsUp, Jump (3 frames)"));
     assert!(md.contains("Chamfer (% of size)") && md.contains("| oracle |"));
+    // The configuration and the command that reproduce the table are named in it.
+    assert!(
+        md.contains(r#"`{"weights":{"partwise":0,"skinning":0}}`"#),
+        "{md}"
+    );
+    assert!(md.contains(&format!("--doc {}", doc.display())), "{md}");
+    assert!(md.contains("cargo run --release -p skinfield-trainer -- zoo --out"));
+    assert!(md.contains("of 1 characters"), "{md}");
+    assert_eq!(
+        json["budget"]["config"][1]["weights"]["skinning"],
+        serde_json::json!(0)
+    );
 }
 
 #[test]
