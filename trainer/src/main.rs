@@ -36,6 +36,8 @@ enum Command {
     Pose(cli::pose::Args),
     /// Simplify or subdivide a template to vertex counts (glTF), timing resample and bind.
     Resample(cli::resample::Args),
+    /// The character zoo: capture, train and score every shared character; one table.
+    Zoo(cli::zoo::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -55,6 +57,7 @@ fn main() {
         Command::Demo(args) => cli::demo::run(args),
         Command::Pose(args) => cli::pose::run(args),
         Command::Resample(args) => cli::resample::run(args),
+        Command::Zoo(args) => cli::zoo::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -10,3 +10,4 @@ pub mod render;
 pub mod resample;
 pub mod synth;
 pub mod train;
+pub mod zoo;

@@ -40,7 +40,8 @@ pub struct Args {
     #[arg(long)]
     pub exr: bool,
     /// Test poses: `novel` (the test clips, beyond the training ranges) or `held-out-phases`
-    /// (the training clips between their training frames; built-in character only).
+    /// (the training clips between their training frames; with `--character`, name no
+    /// `--test-clips`).
     #[arg(long, value_enum, default_value = "novel")]
     pub test_motions: TestMotionsArg,
     /// A rigged glTF/GLB character instead of the built-in one.
@@ -52,7 +53,8 @@ pub struct Args {
     /// Training clip names (with `--character`).
     #[arg(long, value_delimiter = ',', requires = "character")]
     pub train_clips: Vec<String>,
-    /// Test clip names (with `--character`), disjoint from the training clips.
+    /// Test clip names (with `--character`), disjoint from the training clips; none with
+    /// `--test-motions held-out-phases`.
     #[arg(long, value_delimiter = ',', requires = "character")]
     pub test_clips: Vec<String>,
 }

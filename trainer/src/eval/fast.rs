@@ -17,7 +17,7 @@ use skinfield_runtime::{
 
 use super::posing::{Blend, pose_dense_lbs, pose_static};
 use super::table::EvalRow;
-use super::{EvalError, EvalOptions, average, evaluate_mesh_frames, load_skinnet};
+use super::{EvalError, EvalOptions, average, character_size, evaluate_mesh_frames, load_skinnet};
 
 /// Weight format of the scored top-k output.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -140,7 +140,7 @@ pub fn evaluate_fast(
             count += fast.positions.len();
             Ok(fast.positions)
         })?;
-        rows.push(average(&method, &frames));
+        rows.push(average(&method, &frames, character_size(&capture.template)));
         let n = count.max(1) as f64;
         errors.push(VsExact {
             method,

@@ -16,6 +16,27 @@
 //! the gaps between methods. Each frame's samples come from the same seed for every method, so
 //! rows are compared with common random numbers.
 //!
+//! # Figures at any scale
+//!
+//! Centimetres are the model's units × 100 (true centimetres for files in metres, as glTF
+//! specifies, but the shared Fox is 155 units long and RobotExpressive's armature scales its
+//! mesh by 100). Every row therefore also gives its errors relative to the character's size:
+//! [`character_size`] is the **diagonal of the capture template's bounding box** (rest pose),
+//! and `chamfer_pct` is the Chamfer distance as a percentage of it. The diagonal rather than
+//! the height, because the height misstates quadrupeds and lying characters (the Fox is
+//! 79 units tall and 155 long) while the diagonal is defined for any shape; for the built-in
+//! 1.75 m character in its T-pose it is 2.48 m, so 1 cm is 0.40 %.
+//!
+//! # Worst vertex
+//!
+//! Surface distances let a vertex slide along the surface unseen and average a spike away.
+//! Each frame therefore also records the largest **vertex-to-vertex** distance between the
+//! posed template and the ground truth (`max_vertex_cm`, the same vertices, so sliding counts);
+//! a row keeps it per frame (`per_frame`) and its maximum over the frames. [`worst_vertex_check`]
+//! compares two rows frame by frame: "no test frame where any vertex of ours is further from
+//! the truth than the worst vertex of bone heat on that frame". Templates of another resolution
+//! have no vertex correspondence and leave these fields empty.
+//!
 //! # Templates at other resolutions
 //!
 //! [`evaluate_template`] poses another mesh over the capture's canonical space (e.g. one of
@@ -61,7 +82,10 @@ use skinfield_runtime::SkinNetModel;
 pub use posing::{Blend, PosingError, pose_static};
 pub use static_weights::{StaticWeightsError, read_static_weights, write_static_weights};
 pub use surface::{DEFAULT_SAMPLES, Surface, SurfaceError, SurfaceMetrics, surface_metrics};
-pub use table::{EvalRow, rows_from_json, rows_to_json, rows_to_table};
+pub use table::{
+    EvalRow, FrameRow, WorstVertexCheck, rows_from_json, rows_to_json, rows_to_table,
+    worst_vertex_check,
+};
 
 /// The skinning whose posed meshes are scored.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -409,6 +433,9 @@ pub struct FrameMetrics {
     pub m2s_cm: f64,
     /// S2M (cm).
     pub s2m_cm: f64,
+    /// Largest vertex-to-vertex distance to the ground truth (cm), when the posed mesh has the
+    /// capture template's vertices (`None` for a template of another resolution).
+    pub max_vertex_cm: Option<f64>,
 }
 
 /// The sampling seed of one frame: distinct streams per frame, identical across methods.
@@ -463,23 +490,67 @@ pub fn evaluate_mesh_frames(
             frame,
             m2s_cm: m.m2s * 100.0,
             s2m_cm: m.s2m * 100.0,
+            max_vertex_cm: max_vertex_distance(&posed, &truth).map(|d| d * 100.0),
         });
     }
     Ok(out)
 }
 
-/// Averages per-frame metrics into a table row.
+/// The largest distance between corresponding vertices (model units), or `None` when the two
+/// lists differ in length (meshes of different resolutions have no vertex correspondence).
 #[must_use]
-pub fn average(method: &str, frames: &[FrameMetrics]) -> EvalRow {
+pub fn max_vertex_distance(posed: &[Vec3], truth: &[Vec3]) -> Option<f64> {
+    (posed.len() == truth.len()).then(|| {
+        posed
+            .iter()
+            .zip(truth)
+            .map(|(a, b)| f64::from((*a - *b).length()))
+            .fold(0.0f64, f64::max)
+    })
+}
+
+/// The character's size that relative errors are measured against: the diagonal of the
+/// capture template's bounding box (rest pose), in model units; 0 for an empty template.
+#[must_use]
+pub fn character_size(template: &Template) -> f64 {
+    template
+        .bounds()
+        .map_or(0.0, |b| f64::from(b.size().length()))
+}
+
+/// Averages per-frame metrics into a table row; `size` is the character's size
+/// ([`character_size`], model units) for the relative columns.
+#[must_use]
+pub fn average(method: &str, frames: &[FrameMetrics], size: f64) -> EvalRow {
     let n = frames.len().max(1) as f64;
     let m2s = frames.iter().map(|f| f.m2s_cm).sum::<f64>() / n;
     let s2m = frames.iter().map(|f| f.s2m_cm).sum::<f64>() / n;
+    let max_vertex = frames
+        .iter()
+        .map(|f| f.max_vertex_cm)
+        .collect::<Option<Vec<f64>>>()
+        .map(|v| v.into_iter().fold(0.0f64, f64::max));
+    // cm → model units is ÷ 100; a percentage of the size is × 100: the two cancel.
+    let percent = |cm: f64| if size > 0.0 { cm / size } else { 0.0 };
     EvalRow {
         method: method.to_string(),
         chamfer_cm: m2s + s2m,
         m2s_cm: m2s,
         s2m_cm: s2m,
         frames: frames.len(),
+        size,
+        chamfer_pct: percent(m2s + s2m),
+        max_vertex_cm: max_vertex,
+        max_vertex_pct: max_vertex.map(percent),
+        per_frame: frames
+            .iter()
+            .map(|f| FrameRow {
+                frame: f.frame,
+                m2s_cm: f.m2s_cm,
+                s2m_cm: f.s2m_cm,
+                max_vertex_cm: f.max_vertex_cm,
+            })
+            .collect(),
     }
 }
 
@@ -506,7 +577,11 @@ pub fn evaluate_template(
     let frames = evaluate_mesh_frames(capture, &template.triangles, options, |frame| {
         prepared.pose_rest(capture, &template.positions, frame)
     })?;
-    Ok(average(prepared.method(), &frames))
+    Ok(average(
+        prepared.method(),
+        &frames,
+        character_size(&capture.template),
+    ))
 }
 
 /// The template of a glTF/GLB file: the mesh of its largest skin, else its first unskinned

@@ -143,6 +143,11 @@ mod tests {
             m2s_cm: chamfer / 2.0,
             s2m_cm: chamfer / 2.0,
             frames: 3,
+            size: 0.0,
+            chamfer_pct: 0.0,
+            max_vertex_cm: None,
+            max_vertex_pct: None,
+            per_frame: Vec::new(),
         }
     }
 

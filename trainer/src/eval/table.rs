@@ -1,5 +1,8 @@
 //! Result rows and their two renderings: a fixed-width text table and JSON
-//! (`{"rows":[{"method":…,"chamfer_cm":…,"m2s_cm":…,"s2m_cm":…,"frames":…}]}`).
+//! (`{"rows":[{"method":…,"chamfer_cm":…,"m2s_cm":…,"s2m_cm":…,"frames":…,"size":…,
+//! "chamfer_pct":…,"max_vertex_cm":…,"max_vertex_pct":…,"per_frame":[{"frame":…,"m2s_cm":…,
+//! "s2m_cm":…,"max_vertex_cm":…}]}]}`; the fields after `frames` were added later and default
+//! when absent, so older files still parse).
 
 use std::fmt::Write as _;
 
@@ -16,6 +19,77 @@ pub struct EvalRow {
     pub s2m_cm: f64,
     /// Number of test frames averaged.
     pub frames: usize,
+    /// The character's size (rest-pose bounding-box diagonal, model units) the relative
+    /// columns are measured against.
+    #[serde(default)]
+    pub size: f64,
+    /// Chamfer distance as a percentage of `size` (0 when the size is 0).
+    #[serde(default)]
+    pub chamfer_pct: f64,
+    /// Largest vertex-to-vertex distance to the ground truth over every test frame (cm);
+    /// `None` when the posed mesh is not the capture's template.
+    #[serde(default)]
+    pub max_vertex_cm: Option<f64>,
+    /// `max_vertex_cm` as a percentage of `size`.
+    #[serde(default)]
+    pub max_vertex_pct: Option<f64>,
+    /// Each test frame's figures, in the capture's test-frame order.
+    #[serde(default)]
+    pub per_frame: Vec<FrameRow>,
+}
+
+/// One test frame of an [`EvalRow`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameRow {
+    /// The frame index.
+    pub frame: usize,
+    /// M2S (cm).
+    pub m2s_cm: f64,
+    /// S2M (cm).
+    pub s2m_cm: f64,
+    /// Largest vertex-to-vertex distance to the ground truth (cm), if defined.
+    pub max_vertex_cm: Option<f64>,
+}
+
+/// The outcome of [`worst_vertex_check`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct WorstVertexCheck {
+    /// Frames compared.
+    pub frames: usize,
+    /// Frames where the candidate's worst vertex is further from the truth than the
+    /// reference's: `(frame, candidate cm, reference cm)`.
+    pub failures: Vec<(usize, f64, f64)>,
+}
+
+impl WorstVertexCheck {
+    /// True when no frame failed (and at least one was compared).
+    #[must_use]
+    pub fn passed(&self) -> bool {
+        self.frames > 0 && self.failures.is_empty()
+    }
+}
+
+/// Compares, frame by frame, the worst vertex of `candidate` with that of `reference` (e.g.
+/// ours against bone heat). `None` when the rows lack per-vertex figures or their frames differ.
+#[must_use]
+pub fn worst_vertex_check(candidate: &EvalRow, reference: &EvalRow) -> Option<WorstVertexCheck> {
+    if candidate.per_frame.len() != reference.per_frame.len() || candidate.per_frame.is_empty() {
+        return None;
+    }
+    let mut failures = Vec::new();
+    for (c, r) in candidate.per_frame.iter().zip(&reference.per_frame) {
+        if c.frame != r.frame {
+            return None;
+        }
+        let (cv, rv) = (c.max_vertex_cm?, r.max_vertex_cm?);
+        if cv > rv {
+            failures.push((c.frame, cv, rv));
+        }
+    }
+    Some(WorstVertexCheck {
+        frames: candidate.per_frame.len(),
+        failures,
+    })
 }
 
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -41,7 +115,9 @@ pub fn rows_from_json(text: &str) -> Result<Vec<EvalRow>, serde_json::Error> {
     Ok(r.rows.into_owned())
 }
 
-/// The rows as a text table, in the paper's column order (Chamfer, M2S, S2M), two decimals.
+/// The rows as a text table, in the paper's column order (Chamfer, M2S, S2M), three decimals,
+/// then the frame count, the Chamfer relative to the character's size and the worst vertex
+/// (`-` where undefined).
 #[must_use]
 pub fn rows_to_table(rows: &[EvalRow]) -> String {
     let width = rows
@@ -53,15 +129,28 @@ pub fn rows_to_table(rows: &[EvalRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<width$}  {:>12}  {:>8}  {:>8}  {:>6}",
-        "method", "Chamfer (cm)", "M2S (cm)", "S2M (cm)", "frames"
+        "{:<width$}  {:>12}  {:>8}  {:>8}  {:>6}  {:>11}  {:>15}",
+        "method",
+        "Chamfer (cm)",
+        "M2S (cm)",
+        "S2M (cm)",
+        "frames",
+        "Chamfer (%)",
+        "max vertex (cm)"
     );
-    let _ = writeln!(s, "{}", "-".repeat(width + 2 + 12 + 2 + 8 + 2 + 8 + 2 + 6));
+    let _ = writeln!(
+        s,
+        "{}",
+        "-".repeat(width + 2 + 12 + 2 + 8 + 2 + 8 + 2 + 6 + 2 + 11 + 2 + 15)
+    );
     for r in rows {
+        let worst = r
+            .max_vertex_cm
+            .map_or_else(|| "-".to_string(), |v| format!("{v:.3}"));
         let _ = writeln!(
             s,
-            "{:<width$}  {:>12.3}  {:>8.3}  {:>8.3}  {:>6}",
-            r.method, r.chamfer_cm, r.m2s_cm, r.s2m_cm, r.frames
+            "{:<width$}  {:>12.3}  {:>8.3}  {:>8.3}  {:>6}  {:>11.4}  {:>15}",
+            r.method, r.chamfer_cm, r.m2s_cm, r.s2m_cm, r.frames, r.chamfer_pct, worst
         );
     }
     s
@@ -71,6 +160,15 @@ pub fn rows_to_table(rows: &[EvalRow]) -> String {
 mod tests {
     use super::*;
 
+    fn frame(frame: usize, max_vertex_cm: Option<f64>) -> FrameRow {
+        FrameRow {
+            frame,
+            m2s_cm: 1.0,
+            s2m_cm: 1.0,
+            max_vertex_cm,
+        }
+    }
+
     fn rows() -> Vec<EvalRow> {
         vec![
             EvalRow {
@@ -79,6 +177,11 @@ mod tests {
                 m2s_cm: 1.5,
                 s2m_cm: 1.75,
                 frames: 12,
+                size: 2.5,
+                chamfer_pct: 1.3,
+                max_vertex_cm: Some(7.5),
+                max_vertex_pct: Some(3.0),
+                per_frame: vec![frame(4, Some(7.5)), frame(9, Some(2.0))],
             },
             EvalRow {
                 method: "oracle-dqs".into(),
@@ -86,6 +189,11 @@ mod tests {
                 m2s_cm: 0.25,
                 s2m_cm: 0.25,
                 frames: 12,
+                size: 2.5,
+                chamfer_pct: 0.2,
+                max_vertex_cm: None,
+                max_vertex_pct: None,
+                per_frame: Vec::new(),
             },
         ]
     }
@@ -100,8 +208,22 @@ mod tests {
         assert_eq!(first["m2s_cm"], 1.5);
         assert_eq!(first["s2m_cm"], 1.75);
         assert_eq!(first["frames"], 12);
+        assert_eq!(first["size"], 2.5);
+        assert_eq!(first["chamfer_pct"], 1.3);
+        assert_eq!(first["max_vertex_cm"], 7.5);
+        assert_eq!(first["per_frame"][1]["frame"], 9);
+        assert_eq!(first["per_frame"][1]["max_vertex_cm"], 2.0);
+        assert!(v["rows"][1]["max_vertex_cm"].is_null());
         assert_eq!(v["rows"].as_array().unwrap().len(), 2);
         assert_eq!(rows_from_json(&text).unwrap(), rows());
+        // A file written before the relative and per-frame fields existed still parses.
+        let old =
+            r#"{"rows":[{"method":"ours","chamfer_cm":1.0,"m2s_cm":0.5,"s2m_cm":0.5,"frames":3}]}"#;
+        let r = rows_from_json(old).unwrap();
+        assert_eq!(
+            (r[0].frames, r[0].max_vertex_cm, r[0].per_frame.len()),
+            (3, None, 0)
+        );
     }
 
     #[test]
@@ -112,9 +234,33 @@ mod tests {
         assert!(
             lines[2].starts_with("initial ")
                 && lines[2].contains("3.250")
-                && lines[2].ends_with("12")
+                && lines[2].contains(" 12 ")
+                && lines[2].contains("1.3000")
+                && lines[2].ends_with("7.500")
         );
         assert!(lines[3].starts_with("oracle-dqs") && lines[3].contains("0.500"));
+        assert!(lines[3].ends_with(" -"));
         assert!(lines.iter().skip(1).all(|l| l.len() == lines[0].len()));
+    }
+
+    #[test]
+    fn worst_vertex_check_names_the_frames_where_the_candidate_is_worse() {
+        let reference = rows().remove(0);
+        let mut candidate = reference.clone();
+        // Equal worst vertices pass; one frame worse fails with both figures named.
+        assert!(worst_vertex_check(&candidate, &reference).unwrap().passed());
+        candidate.per_frame[1].max_vertex_cm = Some(2.5);
+        let check = worst_vertex_check(&candidate, &reference).unwrap();
+        assert_eq!(
+            (check.frames, check.failures.clone()),
+            (2, vec![(9, 2.5, 2.0)])
+        );
+        assert!(!check.passed());
+        // Rows on other frames, or without per-vertex figures, cannot be compared.
+        candidate.per_frame[1].frame = 10;
+        assert!(worst_vertex_check(&candidate, &reference).is_none());
+        candidate.per_frame[1] = frame(9, None);
+        assert!(worst_vertex_check(&candidate, &reference).is_none());
+        assert!(worst_vertex_check(&rows()[1], &rows()[1]).is_none());
     }
 }

@@ -258,3 +258,66 @@ fn per_vertex_error_of_the_truth_is_zero_and_render_writes_camera_sized_images()
     assert_eq!(over.len(), (cam.width * cam.height) as usize);
     assert_ne!(over, image.rgb);
 }
+
+#[test]
+fn worst_vertex_and_relative_figures_follow_a_known_shift() {
+    let dir = tempfile::tempdir().unwrap();
+    let capture = tiny_capture(dir.path());
+    // The ground truth moved by 1 cm: every vertex is exactly 1 cm from its true position.
+    let shift = Vec3::new(0.0, 0.006, 0.008);
+    let shifted = |f: usize| -> Result<Vec<Vec3>, EvalError> {
+        Ok(capture
+            .evaluation_gt_mesh(f)?
+            .iter()
+            .map(|p| *p + shift)
+            .collect())
+    };
+    let frames = evaluate_frames(&capture, &OPTIONS, shifted).unwrap();
+    for f in &frames {
+        let worst = f.max_vertex_cm.unwrap();
+        assert!((worst - 1.0).abs() < 1e-4, "{f:?}");
+    }
+    // The size is the rest template's bounding-box diagonal, from its extreme coordinates.
+    let p = &capture.template.positions;
+    let lo = p.iter().fold(Vec3::splat(f32::MAX), |a, b| a.min(*b));
+    let hi = p.iter().fold(Vec3::splat(f32::MIN), |a, b| a.max(*b));
+    let size = character_size(&capture.template);
+    assert!(
+        (size - f64::from((hi - lo).length())).abs() < 1e-6,
+        "{size}"
+    );
+    let row = average("shifted", &frames, size);
+    // Percent of the size: Chamfer (cm → model units ÷ 100) / size × 100.
+    assert!((row.chamfer_pct - row.chamfer_cm / 100.0 / size * 100.0).abs() < 1e-9);
+    assert!((row.max_vertex_cm.unwrap() - 1.0).abs() < 1e-4);
+    assert!((row.max_vertex_pct.unwrap() - 1.0 / size).abs() < 1e-4);
+    assert_eq!(row.per_frame.len(), capture.test_frames.len());
+    assert!(
+        row.per_frame
+            .iter()
+            .zip(&capture.test_frames)
+            .all(|(r, &f)| r.frame == f)
+    );
+
+    // The method rows carry the per-frame worst vertex; the truth's own weights under DQS are
+    // closer to the truth than uniform weights on every frame.
+    let uniform = dir.path().join("uniform.json");
+    write_weights(&capture, &uniform, None);
+    let uniform_row = evaluate(&capture, &Skinning::Static(uniform), &OPTIONS).unwrap();
+    let dqs_row = evaluate(&capture, &Skinning::OracleDqs, &OPTIONS).unwrap();
+    let check = worst_vertex_check(&dqs_row, &uniform_row).unwrap();
+    assert!(check.passed(), "{check:?}");
+    assert!(!worst_vertex_check(&uniform_row, &dqs_row).unwrap().passed());
+
+    // A posed mesh with other vertices has no vertex correspondence: no worst vertex.
+    let mut triangles = capture.template.triangles.clone();
+    triangles.truncate(triangles.len() / 2);
+    let frames = evaluate_mesh_frames(&capture, &triangles, &OPTIONS, |f| {
+        let mut p = capture.evaluation_gt_mesh(f)?;
+        p.push(Vec3::ZERO);
+        Ok(p)
+    })
+    .unwrap();
+    assert!(frames.iter().all(|f| f.max_vertex_cm.is_none()));
+    assert_eq!(average("other", &frames, size).max_vertex_cm, None);
+}

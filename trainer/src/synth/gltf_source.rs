@@ -1,28 +1,35 @@
 //! `trainer synth --character FILE`: a capture of any rigged glTF character.
 //!
-//! The template, skeleton and artist weights come from the file's largest skin; the artist
-//! weights are the ground truth's static part. Motion comes from named clips of the same file
+//! The template, skeleton and artist weights are every mesh that moves with the file's largest
+//! skin (other skins over the same joints and rigid mesh nodes below its joints merged, in the
+//! rest scene's space: [`super::gltf_character`]); the artist weights are the ground truth's
+//! static part. Motion comes from named clips of the same file
 //! or of another glTF whose joints are matched by name (`--motion`). The ground-truth deformer
 //! is dual-quaternion skinning with the artist weights plus the flexion bulge at joints whose
 //! names mark an elbow or a knee ([`is_bulge_joint`]). glTF files carry no skin / clothing
 //! labels, so there is no skirt push-out for them (the built-in character has one).
 //! Characters without vertex colours get a procedural pattern (a colour per primitive,
-//! modulated by stripes and value noise) so the images carry gradients.
+//! modulated by stripes and value noise) so the images carry gradients. The cameras frame the
+//! ground truth's bounding box over every frame ([`Framing::around`]), whatever the
+//! character's size, unit or proportions.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 use skinfield_formats::gltf_io::{GltfDocument, load_gltf};
 use skinfield_formats::mesh::area_weighted_normals;
+use skinfield_formats::{Aabb, Pose};
 
 use super::body::Part;
 use super::deform::GroundTruthDeformer;
+use super::gltf_character::assemble;
 use super::motion::Split;
 use super::output::{Subject, SynthSummary, write_subject};
-use super::rig::camera_rig_around;
+use super::rig::{Framing, camera_rig_framed};
 use super::texture::value_noise;
-use super::{SynthConfig, SynthError};
+use super::{SynthConfig, SynthError, TestMotions};
 
 /// Where a glTF capture's character and motion come from.
 #[derive(Clone, Debug, PartialEq)]
@@ -67,7 +74,13 @@ fn load(path: &Path) -> Result<GltfDocument, SynthError> {
 
 /// Makes a capture of a glTF character in `dir`: `config.train_frames_per_clip` frames of
 /// every training clip and `config.test_frames_per_clip` of every test clip, sampled at the
-/// middles of equal time slices of each clip.
+/// middles of equal time slices of each clip. With [`TestMotions::HeldOutPhases`] the test
+/// frames are the training clips halfway between their training frames instead (as for the
+/// built-in character; no test clips may be named then).
+///
+/// The template is every mesh that moves with the largest skin's skeleton, in the rest scene's
+/// space ([`super::gltf_character`]); the cameras frame the bounding box of the ground truth
+/// over every frame ([`Framing::around`]).
 pub fn synthesize_gltf(
     dir: &Path,
     config: &SynthConfig,
@@ -75,10 +88,12 @@ pub fn synthesize_gltf(
 ) -> Result<SynthSummary, SynthError> {
     config.validate()?;
     let start = Instant::now();
-    if config.test_motions != super::TestMotions::Novel {
+    let held_out = config.test_motions == TestMotions::HeldOutPhases;
+    if held_out && !source.test_clips.is_empty() {
         return Err(SynthError::Config {
-            field: "test_motions",
-            reason: "held-out phases are for the built-in character; name test clips instead"
+            field: "test_clips",
+            reason: "held-out phases test on the training clips between their training frames; \
+                     name no test clips with them"
                 .into(),
         });
     }
@@ -99,6 +114,7 @@ pub fn synthesize_gltf(
         });
     }
     let doc = load(&source.character)?;
+    let character = assemble(&doc)?;
     let skin = doc.largest_skin().ok_or_else(|| SynthError::Config {
         field: "character",
         reason: format!("{} has no skin", source.character.display()),
@@ -108,45 +124,57 @@ pub fn synthesize_gltf(
         None => None,
     };
     let clips_doc = motion_doc.as_ref().unwrap_or(&doc);
+    let clip_named = |name: &str, field: &'static str| {
+        clips_doc.clip(name).ok_or_else(|| SynthError::Config {
+            field,
+            reason: format!(
+                "no clip `{name}` in {}; it has: {}",
+                clips_doc.source.display(),
+                clips_doc
+                    .clips
+                    .iter()
+                    .map(|c| c.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })
+    };
+    let sample = |clip: &skinfield_formats::gltf_io::Clip, t: f32| match motion_doc {
+        None => clip.sample(skin, t),
+        Some(_) => clip.sample_by_name(&skin.skeleton, &skin.default_pose(), t),
+    };
+    // Training phase i of n sits at (i + ½)/n of the clip; a held-out phase at (k + 1)/T, midway
+    // between training phases k and k + 1 (distinct while test ≤ train frames, which the
+    // config checks), as in the built-in motion library.
+    let (n_train, n_test) = (config.train_frames_per_clip, config.test_frames_per_clip);
     let mut frames = Vec::new();
-    for (names, split, n) in [
-        (
-            &source.train_clips,
-            Split::Train,
-            config.train_frames_per_clip,
-        ),
-        (&source.test_clips, Split::Test, config.test_frames_per_clip),
-    ] {
-        for name in names {
-            let clip = clips_doc.clip(name).ok_or_else(|| SynthError::Config {
-                field: if split == Split::Train {
-                    "train_clips"
-                } else {
-                    "test_clips"
-                },
-                reason: format!(
-                    "no clip `{name}` in {}; it has: {}",
-                    clips_doc.source.display(),
-                    clips_doc
-                        .clips
-                        .iter()
-                        .map(|c| c.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            })?;
-            for i in 0..n {
-                let t = clip.duration_s * (i as f32 + 0.5) / n as f32;
-                let pose = match motion_doc {
-                    None => clip.sample(skin, t),
-                    Some(_) => clip.sample_by_name(&skin.skeleton, &skin.default_pose(), t),
-                };
-                frames.push((name.clone(), split, pose));
+    for name in &source.train_clips {
+        let clip = clip_named(name, "train_clips")?;
+        for i in 0..n_train {
+            let t = clip.duration_s * (i as f32 + 0.5) / n_train as f32;
+            frames.push((name.clone(), Split::Train, sample(clip, t)));
+        }
+    }
+    if held_out {
+        for name in &source.train_clips {
+            let clip = clip_named(name, "train_clips")?;
+            for i in 0..n_test {
+                let phase = (i * n_train / n_test + 1) as f32 / n_train as f32;
+                let t = clip.duration_s * phase;
+                frames.push((format!("{name}_heldout"), Split::Test, sample(clip, t)));
+            }
+        }
+    } else {
+        for name in &source.test_clips {
+            let clip = clip_named(name, "test_clips")?;
+            for i in 0..n_test {
+                let t = clip.duration_s * (i as f32 + 0.5) / n_test as f32;
+                frames.push((name.clone(), Split::Test, sample(clip, t)));
             }
         }
     }
 
-    let mut template = skin.template.clone();
+    let mut template = character.template.clone();
     if template.normals.len() != template.positions.len()
         || template
             .normals
@@ -165,24 +193,29 @@ pub fn synthesize_gltf(
     let height = bounds.size().y.max(1e-3);
     if template.colors.is_none() {
         let mut colors = vec![Vec3::splat(0.7); template.vertex_count()];
-        for (k, prim) in skin.primitives.iter().enumerate() {
-            let base = PALETTE[prim.material.unwrap_or(k) % PALETTE.len()];
-            for v in prim.first_vertex..(prim.first_vertex + prim.vertex_count).min(colors.len()) {
-                let p = (template.positions[v] - bounds.min) / height;
+        for (k, part) in character.parts.iter().enumerate() {
+            let base = PALETTE[part.material.unwrap_or(k) % PALETTE.len()];
+            let end = (part.first_vertex + part.vertex_count).min(colors.len());
+            let start = part.first_vertex.min(end);
+            for (colour, &position) in colors[start..end]
+                .iter_mut()
+                .zip(&template.positions[start..end])
+            {
+                let p = (position - bounds.min) / height;
                 let stripe = 0.85 + 0.15 * (std::f32::consts::TAU * p.y * 14.0).sin();
                 let noise = 0.8 + 0.4 * value_noise(p, 0.03, config.seed);
-                colors[v] = (base * stripe * noise).clamp(Vec3::ZERO, Vec3::ONE);
+                *colour = (base * stripe * noise).clamp(Vec3::ZERO, Vec3::ONE);
             }
         }
         template.colors = Some(colors);
     }
-    let skeleton = skin.skeleton.clone();
+    let skeleton = character.skeleton.clone();
     let bulge: Vec<usize> = (0..skeleton.len())
         .filter(|&j| is_bulge_joint(&skeleton.names()[j]))
         .collect();
     let deformer = GroundTruthDeformer::new(
         skeleton.clone(),
-        skin.skin.clone(),
+        character.skin.clone(),
         template.positions.clone(),
         template.normals.clone(),
         template.triangles.clone(),
@@ -190,28 +223,60 @@ pub fn synthesize_gltf(
     )
     .with_rig(bulge, Vec::new())
     .with_bulge_scale(height / 1.75);
+    let framed = motion_bounds(&deformer, &frames)?.unwrap_or(bounds);
     let character_seconds = start.elapsed().as_secs_f64();
     let subject = Subject {
         template: &template,
         skeleton: &skeleton,
         deformer: &deformer,
         frames,
-        rig: camera_rig_around(
+        rig: camera_rig_framed(
             config.cameras,
             config.width,
             config.height,
             config.seed,
-            bounds.center(),
-            height,
+            &Framing::around(
+                &framed,
+                config.cameras,
+                config.width,
+                config.height,
+                config.seed,
+            ),
         ),
         character: source
             .character
             .file_name()
             .map_or_else(String::new, |f| f.to_string_lossy().into_owned()),
         deformer_description:
-            "dual-quaternion skinning with the artist weights + flexion bulge at joints named like \
-                               elbows and knees (trainer::synth::gltf_source); no skirt push-out"
+            "dual-quaternion skinning with the artist weights (rigid parts: weight 1 on their \
+             joint) + flexion bulge at joints named like elbows and knees \
+             (trainer::synth::gltf_source); no skirt push-out"
                 .into(),
     };
     write_subject(dir, config, &subject, start, character_seconds)
+}
+
+/// The bounding box of the ground truth over every frame (`None` without frames).
+pub fn motion_bounds(
+    deformer: &GroundTruthDeformer,
+    frames: &[(String, Split, Pose)],
+) -> Result<Option<Aabb>, SynthError> {
+    let boxes = frames
+        .par_iter()
+        .map(|(_, _, pose)| -> Result<Option<Aabb>, SynthError> {
+            let (positions, _) = deformer.deform(pose)?;
+            Ok(Aabb::from_points(&positions))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut out: Option<Aabb> = None;
+    for b in boxes.into_iter().flatten() {
+        out = Some(match out {
+            None => b,
+            Some(o) => Aabb {
+                min: o.min.min(b.min),
+                max: o.max.max(b.max),
+            },
+        });
+    }
+    Ok(out)
 }

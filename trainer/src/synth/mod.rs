@@ -15,6 +15,7 @@ use skinfield_formats::{Skeleton, SkeletonError, SkinError, Template};
 pub mod body;
 pub mod character;
 pub mod deform;
+pub mod gltf_character;
 pub mod gltf_source;
 mod marching;
 pub mod motion;
@@ -75,7 +76,7 @@ pub struct SynthConfig {
     /// Colour images as 8-bit sRGB PNG or linear float EXR (masks are always PNG).
     pub image_format: ImageFormat,
     /// Which poses the test frames hold (the novel test clips, or held-out phases of the
-    /// training clips; built-in character only).
+    /// training clips).
     pub test_motions: TestMotions,
     /// Seed of every random choice (colour noise, motion amplitudes, camera jitter).
     pub seed: u64,

@@ -369,7 +369,7 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
             ..
         })
     ));
-    // Held-out phases are for the built-in motion library only.
+    // Held-out phases test on the training clips: naming test clips as well is refused.
     let held_out = SynthConfig {
         test_motions: TestMotions::HeldOutPhases,
         ..config
@@ -377,7 +377,200 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
     assert!(matches!(
         synthesize_gltf(dir.path(), &held_out, &source),
         Err(SynthError::Config {
-            field: "test_motions",
+            field: "test_clips",
+            ..
+        })
+    ));
+}
+
+/// Every vertex of `positions` projects inside every camera's image, `margin` pixels from the
+/// border; returns the largest fraction of the image side the projections span in any camera.
+fn assert_in_view(
+    rig: &skinfield_formats::CameraRig,
+    positions: &[Vec3],
+    margin: f32,
+    what: &str,
+) -> f32 {
+    let mut span = 0.0f32;
+    for c in &rig.cameras {
+        let (mut lo, mut hi) = (glam::Vec2::splat(f32::MAX), glam::Vec2::splat(f32::MIN));
+        for (v, &p) in positions.iter().enumerate() {
+            let px = c
+                .project(p)
+                .unwrap_or_else(|| panic!("{what}: vertex {v} is behind {}", c.name));
+            assert!(
+                px.x >= margin
+                    && px.y >= margin
+                    && px.x <= c.width as f32 - margin
+                    && px.y <= c.height as f32 - margin,
+                "{what}: vertex {v} at {px} in {}",
+                c.name
+            );
+            lo = lo.min(px);
+            hi = hi.max(px);
+        }
+        let size = glam::Vec2::new(c.width as f32, c.height as f32);
+        span = span.max(((hi - lo) / size).max_element());
+    }
+    span
+}
+
+#[test]
+fn the_built_in_rig_frames_every_frame_of_both_test_choices() {
+    let config = SynthConfig::tiny();
+    let ch = build_character(&config).unwrap();
+    let rig = rig::camera_rig(12, 256, 256, config.seed);
+    for test in [TestMotions::Novel, TestMotions::HeldOutPhases] {
+        for f in motion::library(&ch.skeleton, 16, 8, test, config.seed).unwrap() {
+            let (positions, _) = ch.deformer.deform(&f.pose).unwrap();
+            assert_in_view(&rig, &positions, 2.0, motion::CLIPS[f.clip].0);
+        }
+    }
+}
+
+/// Every mask of a capture keeps its border free, and in some camera the subject spans at
+/// least `min_span` of the image side: framed, and not a speck.
+fn assert_masks_framed(cap: &skinfield_formats::capture::Capture, min_span: f32) {
+    for f in 0..cap.poses.len() {
+        let mut span = 0.0f32;
+        for (c, cam) in cap.rig.cameras.iter().enumerate() {
+            let mask = cap.load_mask(c, f).unwrap();
+            let (w, h) = (cam.width as usize, cam.height as usize);
+            let (mut x0, mut x1, mut y0, mut y1) = (w, 0, h, 0);
+            for y in 0..h {
+                for x in 0..w {
+                    if mask.coverage[y * w + x] > 0.0 {
+                        assert!(
+                            x > 0 && y > 0 && x + 1 < w && y + 1 < h,
+                            "frame {f}, camera {c}: the subject touches the border"
+                        );
+                        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+                    }
+                }
+            }
+            assert!(x1 >= x0, "frame {f}, camera {c}: empty mask");
+            span = span.max(((x1 - x0) as f32 / w as f32).max((y1 - y0) as f32 / h as f32));
+        }
+        assert!(
+            span >= min_span,
+            "frame {f}: the subject spans only {span} of the image"
+        );
+    }
+}
+
+#[test]
+fn fox_capture_frames_the_quadruped() {
+    let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
+        return;
+    };
+    // The Fox is 79 units tall and 155 long: a rig for a 1.8 m human stood inside it.
+    let source = GltfSource {
+        character: data.join("khronos-fox/Fox.glb"),
+        motion: None,
+        train_clips: vec!["Survey".into(), "Walk".into()],
+        test_clips: vec!["Run".into()],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig {
+        cameras: 6,
+        width: 64,
+        height: 64,
+        train_frames_per_clip: 2,
+        test_frames_per_clip: 3,
+        ..SynthConfig::tiny()
+    };
+    synthesize_gltf(dir.path(), &config, &source).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    let size = cap.template.bounds().unwrap().size();
+    assert!(
+        size.max_element() > 100.0,
+        "the Fox is in its own units: {size}"
+    );
+    assert_masks_framed(&cap, 0.5);
+    for &f in &cap.test_frames {
+        let gt = cap.evaluation_gt_mesh(f).unwrap();
+        let span = assert_in_view(&cap.rig, &gt, 1.0, "fox");
+        assert!(span > 0.5, "frame {f}: the fox spans {span} of the image");
+    }
+}
+
+#[test]
+fn gltf_held_out_phases_test_the_training_clip_between_its_frames() {
+    let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
+        return;
+    };
+    let path = data.join("khronos-cesiumman/CesiumMan.glb");
+    let source = GltfSource {
+        character: path.clone(),
+        motion: None,
+        train_clips: vec!["animation_0".into()],
+        test_clips: Vec::new(),
+    };
+    let config = SynthConfig {
+        train_frames_per_clip: 4,
+        test_frames_per_clip: 2,
+        test_motions: TestMotions::HeldOutPhases,
+        ..SynthConfig::tiny()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let summary = synthesize_gltf(dir.path(), &config, &source).unwrap();
+    assert_eq!((summary.train_frames, summary.test_frames), (4, 2));
+    let cap = load_capture(dir.path()).unwrap();
+    let names: Vec<(&str, &str)> = cap
+        .manifest
+        .clips
+        .iter()
+        .map(|c| (c.name.as_str(), c.split.as_str()))
+        .collect();
+    assert_eq!(
+        names,
+        [("animation_0", "train"), ("animation_0_heldout", "test")]
+    );
+    // Training frames at (i + ½)/4 of the clip; held-out ones at 1/4 and 3/4, midway between
+    // training frames 0–1 and 2–3: poses of the clip that training never sees.
+    let doc = skinfield_formats::gltf_io::load_gltf(&path).unwrap();
+    let skin = doc.largest_skin().unwrap();
+    let clip = doc.clip("animation_0").unwrap();
+    let at = |phase: f32| clip.sample(skin, clip.duration_s * phase);
+    let want = [
+        at(0.125),
+        at(0.375),
+        at(0.625),
+        at(0.875),
+        at(0.25),
+        at(0.75),
+    ];
+    assert_eq!(cap.poses.len(), want.len());
+    for (f, (got, want)) in cap.poses.iter().zip(&want).enumerate() {
+        assert_eq!(got, want, "frame {f}");
+    }
+    for &t in &cap.test_frames {
+        assert!(
+            cap.train_frames
+                .iter()
+                .all(|&f| cap.poses[f] != cap.poses[t])
+        );
+    }
+    // Test clips are refused with held-out phases, and too many test frames per clip too.
+    let named = GltfSource {
+        test_clips: vec!["animation_0".into()],
+        ..source.clone()
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &config, &named),
+        Err(SynthError::Config {
+            field: "test_clips",
+            ..
+        })
+    ));
+    let too_many = SynthConfig {
+        test_frames_per_clip: 5,
+        ..config
+    };
+    assert!(matches!(
+        synthesize_gltf(dir.path(), &too_many, &source),
+        Err(SynthError::Config {
+            field: "test_frames_per_clip",
             ..
         })
     ));

@@ -1,0 +1,148 @@
+//! `trainer synth --character RobotExpressive.glb`: the whole robot is the template (two skins
+//! over the same joints and twelve rigid parts, 7,214 vertices), and template, ground truth and
+//! cameras agree on where it is. Checked against the independent glTF skinning reference
+//! (`formats/tests/gltf_reference`, written on the gltf crate alone): the capture's template,
+//! posed by linear blend skinning with the capture's own skeleton and true weights, must land
+//! on the glTF world positions of every vertex (skinned hands: joint world × inverse bind;
+//! rigid parts: the mesh node's world matrix) at the capture's frame times.
+
+use glam::{DVec3, Mat4, Vec3};
+use skinfield_formats::capture::load_capture;
+use skinfield_formats::shared_data::shared_data_dir;
+use skinfield_trainer::eval::{EvalOptions, Skinning, evaluate};
+use skinfield_trainer::synth::{GltfSource, SynthConfig, synthesize_gltf};
+
+#[path = "../../formats/tests/gltf_reference/mod.rs"]
+mod gltf_reference;
+use gltf_reference::Reference;
+
+/// World positions of every vertex of the robot at `locals`: skin 0's meshes, skin 1's, then
+/// every unskinned mesh node in node order (the order the capture's template documents).
+fn reference_positions(r: &Reference, worlds: &[glam::DMat4]) -> Vec<DVec3> {
+    let mut out = r.skinned(0, worlds);
+    out.extend(r.skinned(1, worlds));
+    let data = |b: gltf::Buffer<'_>| Some(&r.buffers[b.index()].0[..]);
+    for node in r.doc.nodes() {
+        let (Some(mesh), None) = (node.mesh(), node.skin()) else {
+            continue;
+        };
+        for p in mesh.primitives() {
+            let positions = p.reader(data).read_positions().unwrap();
+            out.extend(
+                positions.map(|v| worlds[node.index()].transform_point3(Vec3::from(v).as_dvec3())),
+            );
+        }
+    }
+    out
+}
+
+#[test]
+fn robot_expressive_capture_agrees_with_gltf_skinning_everywhere() {
+    let Some(dir) = shared_data_dir() else { return };
+    let asset = dir.join("threejs-robotexpressive/RobotExpressive.glb");
+    let tmp = tempfile::tempdir().unwrap();
+    let source = GltfSource {
+        character: asset.clone(),
+        motion: None,
+        train_clips: vec!["Walking".into()],
+        test_clips: vec!["Wave".into()],
+    };
+    let config = SynthConfig {
+        cameras: 4,
+        width: 48,
+        height: 48,
+        train_frames_per_clip: 2,
+        test_frames_per_clip: 2,
+        ..SynthConfig::tiny()
+    };
+    synthesize_gltf(tmp.path(), &config, &source).unwrap();
+    let cap = load_capture(tmp.path()).unwrap();
+    assert_eq!(cap.template.vertex_count(), 7214, "every mesh of the robot");
+    assert_eq!(cap.skeleton.len(), 43);
+
+    let r = Reference::open(&asset);
+    let clip_index = |name: &str| {
+        r.doc
+            .animations()
+            .position(|a| a.name() == Some(name))
+            .unwrap()
+    };
+    let truth = cap.evaluation_true_weights().unwrap().unwrap();
+    // Frame times: (i + ½)/n of each clip (Walking 0.9583 s, Wave 1.8333 s as stored).
+    let doc = skinfield_formats::gltf_io::load_gltf(&asset).unwrap();
+    let mut frame = 0;
+    let mut size = 0.0f64;
+    for (clip, n) in [("Walking", 2), ("Wave", 2)] {
+        let duration = doc.clip(clip).unwrap().duration_s;
+        for i in 0..n {
+            let t = f64::from(duration * (i as f32 + 0.5) / n as f32);
+            let want = reference_positions(&r, &r.worlds(&r.locals(&[clip_index(clip)], t)));
+            let mut m = vec![Mat4::IDENTITY; cap.skeleton.len()];
+            cap.skeleton
+                .skinning_matrices(&cap.poses[frame], &mut m)
+                .unwrap();
+            let got: Vec<Vec3> = cap
+                .template
+                .positions
+                .iter()
+                .enumerate()
+                .map(|(v, &x)| {
+                    let (js, ws) = truth.influences(v);
+                    js.iter()
+                        .zip(ws)
+                        .map(|(&j, &w)| m[j as usize].transform_point3(x) * w)
+                        .sum()
+                })
+                .collect();
+            let error = gltf_reference::relative_error(&got, &want);
+            assert!(
+                error < 1e-5,
+                "{clip} at {t} s: the capture's LBS is {error} of the robot's size from glTF"
+            );
+            let (lo, hi) = want.iter().fold(
+                (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)),
+                |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+            );
+            size = size.max((hi - lo).length());
+            frame += 1;
+        }
+    }
+    // In glTF's world the robot is about 4.5 units tall; the template is in that world too.
+    let template_size = f64::from(cap.template.bounds().unwrap().size().length());
+    assert!(
+        (template_size / size - 1.0).abs() < 0.5,
+        "template {template_size} vs posed {size}"
+    );
+
+    // Every camera sees the robot whole in every test frame, and the oracle is close to the
+    // ground truth (DQS + bulges with the same weights), not metres off.
+    for &f in &cap.test_frames {
+        let gt = cap.evaluation_gt_mesh(f).unwrap();
+        for c in &cap.rig.cameras {
+            for p in &gt {
+                let px = c.project(*p).expect("in front of the camera");
+                assert!(
+                    px.x > 0.0 && px.y > 0.0 && px.x < 48.0 && px.y < 48.0,
+                    "{} sees {p} at {px}",
+                    c.name
+                );
+            }
+        }
+        let mask = cap.load_mask(0, f).unwrap();
+        assert!(mask.inside.iter().filter(|&&m| m).count() > 100);
+    }
+    let oracle = evaluate(
+        &cap,
+        &Skinning::Oracle,
+        &EvalOptions {
+            samples: 2000,
+            seed: 0,
+        },
+    )
+    .unwrap();
+    assert!(
+        oracle.chamfer_pct < 1.0,
+        "oracle Chamfer {} % of the size",
+        oracle.chamfer_pct
+    );
+}
