@@ -115,6 +115,53 @@ pub(crate) fn check_attr<A, B>(
     Ok(())
 }
 
+/// The optional per-vertex attributes every skinning job validates the same way: each output
+/// needs its rest input, rest inputs cover the mesh (`vertices`), outputs the range (`count`),
+/// and `out_weights` holds `joints` weights per vertex of the range.
+pub(crate) struct VertexOutputs<'s> {
+    pub(crate) rest_normals: Option<&'s [Vec3]>,
+    pub(crate) out_normals: Option<&'s [Vec3]>,
+    pub(crate) rest_tangents: Option<&'s [Vec4]>,
+    pub(crate) out_tangents: Option<&'s [Vec4]>,
+    pub(crate) out_weights: Option<&'s [f32]>,
+}
+
+impl VertexOutputs<'_> {
+    /// Checks the attributes; the error names the first wrong field.
+    pub(crate) fn check(
+        &self,
+        vertices: usize,
+        count: usize,
+        joints: usize,
+    ) -> Result<(), RuntimeError> {
+        check_attr(
+            self.rest_normals,
+            self.out_normals,
+            ("rest_normals", "out_normals"),
+            vertices,
+            count,
+        )?;
+        check_attr(
+            self.rest_tangents,
+            self.out_tangents,
+            ("rest_tangents", "out_tangents"),
+            vertices,
+            count,
+        )?;
+        if let Some(w) = self.out_weights {
+            let expected = count * joints;
+            if w.len() != expected {
+                return Err(RuntimeError::BufferLength {
+                    field: "out_weights",
+                    len: w.len(),
+                    expected,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Skins `out_positions.len()` vertices starting at `first_vertex` with SkinNet weights.
 pub struct SkinJob<'a, W> {
     /// The expanded model.
@@ -146,32 +193,14 @@ impl<W: AsRef<[f32]>> SkinJob<'_, W> {
     pub fn validate(&self) -> Result<(), RuntimeError> {
         let count = self.out_positions.len();
         check_parts(self.model, self.mesh, self.frame, self.first_vertex, count)?;
-        let n = self.mesh.vertex_count();
-        check_attr(
-            self.rest_normals,
-            self.out_normals.as_deref(),
-            ("rest_normals", "out_normals"),
-            n,
-            count,
-        )?;
-        check_attr(
-            self.rest_tangents,
-            self.out_tangents.as_deref(),
-            ("rest_tangents", "out_tangents"),
-            n,
-            count,
-        )?;
-        if let Some(w) = &self.out_weights {
-            let expected = count * self.model.joint_count();
-            if w.len() != expected {
-                return Err(RuntimeError::BufferLength {
-                    field: "out_weights",
-                    len: w.len(),
-                    expected,
-                });
-            }
+        VertexOutputs {
+            rest_normals: self.rest_normals,
+            out_normals: self.out_normals.as_deref(),
+            rest_tangents: self.rest_tangents,
+            out_tangents: self.out_tangents.as_deref(),
+            out_weights: self.out_weights.as_deref(),
         }
-        Ok(())
+        .check(self.mesh.vertex_count(), count, self.model.joint_count())
     }
 
     /// Validates, then skins the range. Never allocates.

@@ -6,7 +6,7 @@ use skinfield_formats::StaticSkin;
 
 use crate::error::RuntimeError;
 use crate::frame::Palette;
-use crate::job::check_attr;
+use crate::job::VertexOutputs;
 use crate::kernels::{Kernel, blend};
 use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
 
@@ -67,21 +67,14 @@ impl StaticSkinJob<'_> {
                 vertex_count: n,
             });
         }
-        check_attr(
-            self.rest_normals,
-            self.out_normals.as_deref(),
-            ("rest_normals", "out_normals"),
-            n,
-            count,
-        )?;
-        check_attr(
-            self.rest_tangents,
-            self.out_tangents.as_deref(),
-            ("rest_tangents", "out_tangents"),
-            n,
-            count,
-        )?;
-        Ok(())
+        VertexOutputs {
+            rest_normals: self.rest_normals,
+            out_normals: self.out_normals.as_deref(),
+            rest_tangents: self.rest_tangents,
+            out_tangents: self.out_tangents.as_deref(),
+            out_weights: None,
+        }
+        .check(n, count, 0)
     }
 
     /// Validates, then skins the range. Never allocates.

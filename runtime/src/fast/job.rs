@@ -12,7 +12,7 @@ use super::topk::strongest_influences;
 use super::{Influence, MAX_INFLUENCES};
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
-use crate::job::{Scratch, WeightsJob, check_attr};
+use crate::job::{Scratch, VertexOutputs, WeightsJob};
 use crate::kernels::blend;
 use crate::model::SkinNet;
 use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
@@ -223,32 +223,14 @@ impl FastSkinJob<'_> {
                 max: MAX_INFLUENCES,
             });
         }
-        let n = self.mesh.vertex_count();
-        check_attr(
-            self.rest_normals,
-            self.out_normals.as_deref(),
-            ("rest_normals", "out_normals"),
-            n,
-            count,
-        )?;
-        check_attr(
-            self.rest_tangents,
-            self.out_tangents.as_deref(),
-            ("rest_tangents", "out_tangents"),
-            n,
-            count,
-        )?;
-        if let Some(w) = &self.out_weights {
-            let expected = count * self.mesh.joint_count();
-            if w.len() != expected {
-                return Err(RuntimeError::BufferLength {
-                    field: "out_weights",
-                    len: w.len(),
-                    expected,
-                });
-            }
+        VertexOutputs {
+            rest_normals: self.rest_normals,
+            out_normals: self.out_normals.as_deref(),
+            rest_tangents: self.rest_tangents,
+            out_tangents: self.out_tangents.as_deref(),
+            out_weights: self.out_weights.as_deref(),
         }
-        Ok(())
+        .check(self.mesh.vertex_count(), count, self.mesh.joint_count())
     }
 
     /// Validates, then skins the range. Never allocates.

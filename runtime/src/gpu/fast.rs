@@ -10,7 +10,9 @@ use glam::{Mat4, Vec3};
 
 use super::GpuError;
 use super::layout::{GpuFastParams, SkinnedVertex, WORKGROUP_THREADS, entry};
-use super::skinner::{GpuMesh, GpuModel, GpuSkinner, Skinning, pipeline, read_buffer};
+use super::skinner::{
+    GpuMesh, GpuModel, GpuSkinner, Skinning, pipeline, read_buffer, read_vertices,
+};
 use crate::fast::{FastMesh, Influence, MAX_INFLUENCES};
 
 /// The fast-path pipelines (built once with the others by [`GpuSkinner::new`]).
@@ -451,13 +453,7 @@ impl GpuFastMesh {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Vec<SkinnedVertex>, GpuError> {
-        let size = u64::from(self.vertex_count) * size_of::<SkinnedVertex>() as u64;
-        Ok(bytemuck::pod_collect_to_vec(&read_buffer(
-            device,
-            queue,
-            &self.output,
-            size,
-        )?))
+        read_vertices(device, queue, &self.output, self.vertex_count)
     }
 
     /// Reads SkinNet's weights at the nodes of the last frame back, `[node][joint]`.

@@ -716,6 +716,19 @@ pub(super) fn read_buffer(
     Ok(bytes)
 }
 
+/// Reads `count` skinned vertices back from `src` (an output vertex buffer).
+pub(super) fn read_vertices(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    src: &wgpu::Buffer,
+    count: u32,
+) -> Result<Vec<SkinnedVertex>, GpuError> {
+    let size = u64::from(count) * size_of::<SkinnedVertex>() as u64;
+    Ok(bytemuck::pod_collect_to_vec(&read_buffer(
+        device, queue, src, size,
+    )?))
+}
+
 impl GpuMesh {
     /// Vertices of the mesh.
     #[must_use]
@@ -742,13 +755,7 @@ impl GpuMesh {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Vec<SkinnedVertex>, GpuError> {
-        let size = u64::from(self.vertex_count) * size_of::<SkinnedVertex>() as u64;
-        Ok(bytemuck::pod_collect_to_vec(&read_buffer(
-            device,
-            queue,
-            &self.output,
-            size,
-        )?))
+        read_vertices(device, queue, &self.output, self.vertex_count)
     }
 
     /// Reads SkinNet's weights of the last frame back, `[vertex][joint]`.

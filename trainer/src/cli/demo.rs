@@ -58,7 +58,10 @@ pub struct Args {
 
 /// Runs `trainer demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.seeds <= 1 || args.ablation.ablations {
+    if args.seeds > 1 && args.ablation.ablations {
+        anyhow::bail!("--seeds runs the plain demo; the ablation table takes one seed (--seed)");
+    }
+    if args.seeds <= 1 {
         return run_seed(&args, args.seed, &args.out).map(|_| ());
     }
     let total = Instant::now();
