@@ -14,8 +14,8 @@ use glam::{Mat4, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
-use skinfield_formats::{Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
-use skinfield_runtime::gpu::{GpuSkinner, Skinning, headless_device};
+use skinfield_formats::{Skeleton, Transform};
+use skinfield_runtime::gpu::{GpuSkinner, headless_device};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 
 fn vertex_counts() -> Vec<usize> {
@@ -70,11 +70,6 @@ fn bench_gpu(c: &mut Criterion) {
             &vec![0.2; skeleton.angle_count()],
         )
         .unwrap();
-    let mut features = vec![0.0; pose_feature_count(joints)];
-    pose_features(&skeleton, &pose, UpAxis::Y, &mut features).unwrap();
-    let mut mats = vec![Mat4::IDENTITY; joints];
-    skeleton.skinning_matrices(&pose, &mut mats).unwrap();
-
     let cpu_net = SkinNet::from_view(&view).unwrap();
     let mut cpu_frame = FrameState::new(&cpu_net);
     let mut scratch = Scratch::new(&cpu_net);
@@ -102,8 +97,10 @@ fn bench_gpu(c: &mut Criterion) {
                 let mut total = Duration::ZERO;
                 for _ in 0..iters {
                     let start = Instant::now();
+                    // The pose goes through the CPU frame state, as the CPU path's does.
+                    cpu_frame.set_pose(&cpu_net, &pose).unwrap();
                     skinner
-                        .skin(&device, &queue, &mesh, &mats, &features, Skinning::Linear)
+                        .skin(&device, &queue, &mesh, &cpu_frame, Method::Lbs)
                         .unwrap();
                     device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
                     total += start.elapsed();

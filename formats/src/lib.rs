@@ -1,8 +1,9 @@
 //! Skinfield asset schema shared by the trainer and the runtime.
 //!
 //! The core (skeleton, pose, pose features, template mesh, static skin, camera rig and the
-//! zero-copy [`skf`] weight-file view) is `no_std` + `alloc`; readers and writers that touch
-//! files (glTF, BVH, capture manifest, images, the `.skf` writer) need the `std` feature.
+//! zero-copy [`skf`] weight-file view) is `no_std` + `alloc`; the `std` feature adds the `.skf`
+//! file writer and reader, and the `import` feature the offline readers and writers (glTF, BVH,
+//! capture manifest, images, MakeHuman), so an engine's build never compiles a parser.
 //!
 //! Conventions (see `DESIGN.md`): right-handed, +Y up, metres; quaternions are glam's
 //! `(x, y, z, w)`; matrices are column-major; joints are stored in topological order
@@ -12,19 +13,19 @@
 
 extern crate alloc;
 
-#[cfg(feature = "std")]
+#[cfg(feature = "import")]
 pub mod bvh;
 pub mod camera;
-#[cfg(feature = "std")]
+#[cfg(feature = "import")]
 pub mod capture;
-#[cfg(feature = "std")]
+#[cfg(feature = "import")]
 pub mod gltf_io;
-#[cfg(feature = "std")]
+#[cfg(feature = "import")]
 pub mod makehuman;
 pub mod math;
 pub mod mesh;
 pub mod pose;
-#[cfg(feature = "std")]
+#[cfg(feature = "import")]
 pub mod shared_data;
 pub mod skeleton;
 pub mod skf;

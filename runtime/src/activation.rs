@@ -86,6 +86,7 @@ pub fn softplus_slope(x: f32, beta: f32) -> f32 {
     }
 }
 
+#[cfg(test)] // the scalar mirror the tests check the SIMD polynomials' constants with
 /// `exp(z)` for `z ≤ 0` by the kernels' polynomial (scalar mirror of the SIMD code).
 #[must_use]
 pub fn exp_poly(z: f32) -> f32 {
@@ -101,6 +102,7 @@ pub fn exp_poly(z: f32) -> f32 {
     y * f32::from_bits(((n as i32 + 127) as u32) << 23)
 }
 
+#[cfg(test)] // the scalar mirror the tests check the SIMD polynomials' constants with
 /// `log1p(y)` for `y ∈ [0, 1]` by the kernels' polynomial (scalar mirror of the SIMD code).
 #[must_use]
 pub fn log1p_poly(y: f32) -> f32 {
@@ -113,12 +115,14 @@ pub fn log1p_poly(y: f32) -> f32 {
     2.0 * s * q
 }
 
+#[cfg(test)] // the scalar mirror the tests check the SIMD polynomials' constants with
 /// Softplus by the kernels' polynomials.
 #[must_use]
 pub fn softplus_poly(x: f32, beta: f32) -> f32 {
     x.max(0.0) + log1p_poly(exp_poly((-beta * x.abs()).max(SOFTPLUS_EXP_MIN))) / beta
 }
 
+#[cfg(test)] // the scalar mirror the tests check the SIMD polynomials' constants with
 /// Softmax in place (exact; max subtracted first, so it never overflows; weights below
 /// `e^-72` of the largest are exactly zero, see [`EXP_TAIL`]).
 pub fn softmax(x: &mut [f32]) {

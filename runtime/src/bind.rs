@@ -19,7 +19,7 @@ pub const MAX_BIND_VERTICES: usize = 1 << 24;
 
 /// `x̂ = 2(x̄ − min)/(max − min) − 1` with the file's canonical bounding box.
 #[must_use]
-pub fn normalise(config: &ModelConfig, x: Vec3) -> Vec3 {
+pub(crate) fn normalise(config: &ModelConfig, x: Vec3) -> Vec3 {
     let lo = Vec3::from_array(config.bbox_min);
     let hi = Vec3::from_array(config.bbox_max);
     2.0 * (x - lo) / (hi - lo) - Vec3::ONE

@@ -1,5 +1,7 @@
 //! The runtime's one error type: every failure names the field or part that is wrong.
 
+use alloc::string::String;
+
 use skinfield_formats::skf::SkfError;
 use skinfield_formats::{PoseError, SkeletonError, SkinError};
 
@@ -111,6 +113,60 @@ pub enum RuntimeError {
     /// A mesh has no vertices, or more than the cap.
     #[error("mesh has {0} vertices (1..=2^24 accepted)")]
     VertexCount(usize),
+    /// Model joints that the engine skeleton does not name ([`crate::JointMap`]).
+    #[error("the engine skeleton lacks {count} of the model's joints: {names}")]
+    MissingJoints {
+        /// How many are missing.
+        count: usize,
+        /// The first few missing names, quoted and comma-separated.
+        names: String,
+    },
+    /// A joint name that appears twice in the engine skeleton ([`crate::JointMap`]).
+    #[error("engine joint `{name}` appears twice, at indices {first} and {second}")]
+    DuplicateJoint {
+        /// The name.
+        name: String,
+        /// Its first index in the engine's order.
+        first: usize,
+        /// Its second index.
+        second: usize,
+    },
+    /// A mapped joint whose engine parent is not the joint its model parent maps to, so local
+    /// transforms would compose differently ([`crate::JointMap::check_parents`]).
+    #[error("joint `{name}`: parent in the model is {model_parent}, in the engine {engine_parent}")]
+    ParentMismatch {
+        /// The joint's name.
+        name: String,
+        /// The model parent's name (or `none`).
+        model_parent: String,
+        /// The engine parent's name (or `none`).
+        engine_parent: String,
+    },
+    /// The engine's bind pose differs from the model's at a joint by more than one shared
+    /// transform ([`crate::JointMap::bind_space`]).
+    #[error(
+        "joint `{name}`: the engine's bind pose differs from the model's (relative difference {difference:.2e} after aligning the bind spaces)"
+    )]
+    BindMismatch {
+        /// The joint's name.
+        name: String,
+        /// Largest entry of the difference of the per-joint bind-space transforms, relative
+        /// to the root's.
+        difference: f32,
+    },
+    /// A byte layout of an interleaved vertex buffer that cannot hold the attributes
+    /// ([`crate::VertexLayout::validate`]).
+    #[error("vertex layout: `{field}` at byte {offset} ({size} bytes) {problem}")]
+    Layout {
+        /// The attribute (`position`, `normal`, `tangent`) or `stride`.
+        field: &'static str,
+        /// Its byte offset (the stride itself for `stride`).
+        offset: usize,
+        /// Its size in bytes.
+        size: usize,
+        /// What is wrong.
+        problem: &'static str,
+    },
 }
 
 #[cfg(test)]

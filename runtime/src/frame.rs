@@ -6,9 +6,10 @@ use alloc::vec::Vec;
 use core::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Mat4;
-use skinfield_formats::{Pose, Skeleton, pose_features};
+use skinfield_formats::{Pose, Skeleton, Transform, pose_features};
 
 use crate::error::RuntimeError;
+use crate::joint_map::JointMap;
 use crate::model::SkinNet;
 use crate::skinning::DualQuat;
 
@@ -115,6 +116,8 @@ pub struct FrameState {
     palette: Palette,
     features: Vec<f32>,
     frame_bias: Vec<f32>,
+    /// The model pose assembled by [`FrameState::set_engine_pose`] (allocated once).
+    mapped: Pose,
     ready: bool,
     /// Unique id of the last successful pose (process-wide), so state derived from a pose (the
     /// fast path's nodes) can tell whether it is current.
@@ -131,6 +134,7 @@ impl FrameState {
             palette: Palette::new(model.joint_count()),
             features: vec![0.0; l.pose_w],
             frame_bias: vec![0.0; l.frame_bias_len],
+            mapped: model.skeleton().bind_pose(),
             ready: false,
             generation: 0,
         }
@@ -170,6 +174,28 @@ impl FrameState {
         self.ready = true;
         self.generation = NEXT_POSE.fetch_add(1, Ordering::Relaxed);
         Ok(())
+    }
+
+    /// Poses the frame from an engine's local transforms, in the engine's joint order, through
+    /// `map` (built for this model at load time). Never allocates; errors as
+    /// [`JointMap::pose_into`] and [`FrameState::set_pose`].
+    pub fn set_engine_pose<W: AsRef<[f32]>>(
+        &mut self,
+        model: &SkinNet<W>,
+        map: &JointMap,
+        engine_locals: &[Transform],
+    ) -> Result<(), RuntimeError> {
+        self.ready = false;
+        if map.model_joint_count() != model.joint_count() {
+            return Err(RuntimeError::Mismatch { field: "joint map" });
+        }
+        // `Vec::new` does not allocate: the buffer is only moved out and back.
+        let mut pose = core::mem::replace(&mut self.mapped, Pose { locals: Vec::new() });
+        let result = map
+            .pose_into(engine_locals, &mut pose)
+            .and_then(|()| self.set_pose(model, &pose));
+        self.mapped = pose;
+        result
     }
 
     /// The joint palette.

@@ -28,35 +28,42 @@
 
 extern crate alloc;
 
-pub mod activation;
-pub mod bind;
+mod activation;
+mod bind;
 pub mod candidates;
-pub mod error;
+mod error;
 pub mod fast;
-pub mod frame;
+mod frame;
 #[cfg(feature = "gpu")]
 pub mod gpu;
-pub mod job;
+mod interleaved;
+mod job;
+mod joint_map;
 pub mod kernels;
-pub mod model;
+mod model;
 #[cfg(feature = "rayon")]
 pub mod parallel;
 #[cfg(feature = "resample")]
 pub mod resample;
-pub mod skinning;
-pub mod static_job;
+mod skinning;
+mod static_job;
 
-pub use bind::{BoundMesh, positional_encoding};
+pub use bind::{BoundMesh, MAX_BIND_VERTICES, positional_encoding};
 pub use error::RuntimeError;
 pub use fast::{
     FastFrame, FastMesh, FastOptions, FastSkinJob, Influence, TopKIndices, TopKJob, TopKWeights,
 };
 pub use frame::{FrameState, Palette};
+pub use interleaved::{CHUNK, InterleavedJob, VertexLayout, WeightSource};
 pub use job::{Scratch, SkinJob, WeightsJob};
+pub use joint_map::JointMap;
 pub use kernels::{Kernel, TILE};
 pub use model::{SkinNet, SkinNetModel, expanded_len};
 pub use skinning::{DualQuat, Method};
 pub use static_job::StaticSkinJob;
 
 pub use glam::{Mat4, Quat, Vec3, Vec4};
-pub use skinfield_formats::{Pose, Skeleton, StaticSkin};
+pub use skinfield_formats::skf::{ModelConfig, SkfError, SkfView};
+#[cfg(feature = "std")]
+pub use skinfield_formats::skf::{SkfFileError, read_skf_file};
+pub use skinfield_formats::{Pose, Skeleton, StaticSkin, Transform, UpAxis};

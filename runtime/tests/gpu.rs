@@ -9,9 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{Candidates, ModelConfig, Net, SkfModel, SkfView};
 use skinfield_formats::{Pose, Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
-use skinfield_runtime::gpu::{
-    GpuError, GpuSkinner, SkinnedVertex, Skinning, WeightFormat, headless_device,
-};
+use skinfield_runtime::gpu::{GpuError, GpuSkinner, SkinnedVertex, WeightFormat, headless_device};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 
 const TOL: f64 = 1e-4;
@@ -315,9 +313,9 @@ fn check_model(
             .map(|&p| net.weights(p, &features))
             .collect();
         let cpu_mesh = BoundMesh::bind(&cpu_net, &positions).unwrap();
-        for mode in [Skinning::Linear, Skinning::DualQuaternion] {
+        for mode in [Method::Lbs, Method::Dqs] {
             skinner
-                .skin(device, queue, &mesh, &mats, &features, mode)
+                .skin(device, queue, &mesh, &cpu_frame, mode)
                 .unwrap();
             let weights = mesh.read_weights(device, queue).unwrap();
             let out: Vec<SkinnedVertex> = mesh.read_vertices(device, queue).unwrap();
@@ -332,10 +330,7 @@ fn check_model(
                 model: &cpu_net,
                 mesh: &cpu_mesh,
                 frame: &cpu_frame,
-                method: match mode {
-                    Skinning::Linear => Method::Lbs,
-                    Skinning::DualQuaternion => Method::Dqs,
-                },
+                method: mode,
                 first_vertex: 0,
                 rest_normals: Some(&normals),
                 rest_tangents: None,
@@ -365,8 +360,8 @@ fn check_model(
                 close("weights", v, &weights[v * w.len()..(v + 1) * w.len()], w);
                 let (p, nrm) = (positions[v].as_dvec3(), normals[v].as_dvec3());
                 let (cp, cn) = match mode {
-                    Skinning::Linear => lbs(w, &dmats, p, nrm),
-                    Skinning::DualQuaternion => dqs(w, &dmats, p, nrm),
+                    Method::Lbs => lbs(w, &dmats, p, nrm),
+                    Method::Dqs => dqs(w, &dmats, p, nrm),
                 };
                 close(
                     &format!("{mode:?} position"),
@@ -469,7 +464,7 @@ fn candidate_joints_mask_the_gpu_softmax_like_the_cpu_path() {
         .bind_mesh(&device, &queue, &gpu_model, &mesh_positions, &normals)
         .unwrap();
     skinner
-        .skin(&device, &queue, &mesh, &mats, &features, Skinning::Linear)
+        .skin(&device, &queue, &mesh, &frame, Method::Lbs)
         .unwrap();
     let weights = mesh.read_weights(&device, &queue).unwrap();
     let out: Vec<SkinnedVertex> = mesh.read_vertices(&device, &queue).unwrap();
@@ -619,18 +614,25 @@ fn bad_inputs_are_typed_errors() {
     let mats = vec![Mat4::IDENTITY; skeleton.len()];
     let feats = vec![0.0; pose_feature_count(skeleton.len())];
     assert!(matches!(
-        skinner.upload_frame(&queue, &mesh, &mats[1..], &feats),
+        skinner.upload_raw(&queue, &mesh, &mats[1..], &feats),
         Err(GpuError::Length {
             field: "skinning matrices",
             ..
         })
     ));
     assert!(matches!(
-        skinner.upload_frame(&queue, &mesh, &mats, &feats[1..]),
+        skinner.upload_raw(&queue, &mesh, &mats, &feats[1..]),
         Err(GpuError::Length {
             field: "pose features",
             ..
         })
     ));
-    skinner.upload_frame(&queue, &mesh, &mats, &feats).unwrap();
+    skinner.upload_raw(&queue, &mesh, &mats, &feats).unwrap();
+    // A frame state that was never posed (or whose last pose failed) is refused.
+    let cpu_net = SkinNet::from_view(&view).unwrap();
+    let frame = FrameState::new(&cpu_net);
+    assert!(matches!(
+        skinner.upload_frame(&queue, &mesh, &frame),
+        Err(GpuError::Frame(skinfield_runtime::RuntimeError::NoPose))
+    ));
 }

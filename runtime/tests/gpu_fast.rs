@@ -5,10 +5,10 @@
 
 mod common;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use skinfield_formats::skf::SkfView;
 use skinfield_runtime::gpu::{
-    FastOutputs, GpuError, GpuFastOptions, GpuSkinner, Skinning, TopKIndexFormat, TopKWeightFormat,
+    FastOutputs, GpuError, GpuFastOptions, GpuSkinner, TopKIndexFormat, TopKWeightFormat,
     headless_device,
 };
 use skinfield_runtime::{
@@ -80,8 +80,6 @@ fn check(bytes: &[u8], options: &FastOptions, seed: u64) {
     let skinner = GpuSkinner::new(&device).unwrap();
     let view = SkfView::parse(bytes).unwrap();
     let model = skinner.bind_model(&device, &view).unwrap();
-    let mats: Vec<Mat4> = c.frame.palette().matrices().to_vec();
-    let features = c.frame.features().to_vec();
     let n = c.mesh.vertex_count();
     for (k, idx, wf) in [
         (4, TopKIndexFormat::U8, TopKWeightFormat::Unorm8),
@@ -95,19 +93,15 @@ fn check(bytes: &[u8], options: &FastOptions, seed: u64) {
         let mesh = skinner
             .bind_fast_mesh(&device, &queue, &model, &c.mesh, &c.normals, &gpu_options)
             .unwrap();
-        for (skinning, method) in [
-            (Skinning::Linear, Method::Lbs),
-            (Skinning::DualQuaternion, Method::Dqs),
-        ] {
+        for method in [Method::Lbs, Method::Dqs] {
             skinner
                 .skin_fast(
                     &device,
                     &queue,
                     &mesh,
-                    &mats,
-                    &features,
+                    &c.frame,
                     FastOutputs {
-                        skinning: Some(skinning),
+                        skinning: Some(method),
                         top_k: true,
                     },
                 )
@@ -353,9 +347,14 @@ fn fast_bad_inputs_are_typed_errors() {
         ),
         Err(GpuError::Setting { .. })
     ));
-    let mats = vec![Mat4::IDENTITY; 5];
+    // A frame of a model with another joint count.
+    let other = SkinNetModel::from_skf(&common::vinecs_bytes(5, 37)).unwrap();
+    let mut frame = FrameState::new(&other);
+    frame
+        .set_pose(&other, &other.skeleton().bind_pose())
+        .unwrap();
     assert!(matches!(
-        skinner.upload_fast_frame(&queue, &mesh, &mats, c.frame.features()),
+        skinner.upload_fast_frame(&queue, &mesh, &frame),
         Err(GpuError::Length {
             field: "skinning matrices",
             ..

@@ -2,60 +2,18 @@
 //! only on this test's thread, around pose → frame → every job kind.
 
 mod common;
+#[path = "common/counting.rs"]
+mod counting;
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+use counting::count_allocations;
 
 use glam::{Vec3, Vec4};
 use skinfield_formats::StaticSkin;
 use skinfield_runtime::{
-    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Palette, Scratch,
-    SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob, TopKWeights, WeightsJob,
+    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, InterleavedJob, JointMap,
+    Method, Palette, Scratch, SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob,
+    TopKWeights, Transform, VertexLayout, WeightSource, WeightsJob,
 };
-
-struct Counting;
-
-thread_local! {
-    static ARMED: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<usize> = const { Cell::new(0) };
-}
-
-fn note() {
-    // `try_with`: the allocator also runs while thread locals are being torn down.
-    let armed = ARMED.try_with(Cell::get).unwrap_or(false);
-    if armed {
-        let _ = COUNT.try_with(|c| c.set(c.get() + 1));
-    }
-}
-
-// SAFETY: forwards every call unchanged to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn count_allocations(f: impl FnOnce()) -> usize {
-    COUNT.with(|c| c.set(0));
-    ARMED.with(|a| a.set(true));
-    f();
-    ARMED.with(|a| a.set(false));
-    COUNT.with(Cell::get)
-}
 
 #[test]
 fn per_frame_path_does_not_allocate() {
@@ -96,6 +54,13 @@ fn per_frame_path_does_not_allocate() {
     let fnv = fp.len();
     let (mut fpos, mut fn_out) = (vec![Vec3::ZERO; fnv], vec![Vec3::ZERO; fnv]);
     let (mut tj, mut tw) = (vec![0u8; fnv * 8], vec![0u16; fnv * 8]);
+    // An engine skeleton in reverse order with one helper joint, and its vertex buffer.
+    let mut names: Vec<String> = model.skeleton().names().iter().rev().cloned().collect();
+    names.push(String::from("socket"));
+    let map = JointMap::new(model.skeleton(), &names).unwrap();
+    let mut engine = vec![Transform::IDENTITY; names.len()];
+    let layout = VertexLayout::POSITION_NORMAL_TANGENT;
+    let mut vbo = vec![0u8; layout.buffer_len(n).unwrap()];
 
     let count = count_allocations(|| {
         for pose in &poses {
@@ -172,8 +137,32 @@ fn per_frame_path_does_not_allocate() {
             .run()
             .unwrap();
         }
+        for pose in &poses {
+            for (j, &e) in map.engine_of_model().iter().enumerate() {
+                engine[e] = pose.locals[j];
+            }
+            frame.set_engine_pose(&model, &map, &engine).unwrap();
+            InterleavedJob {
+                source: WeightSource::Exact {
+                    model: &model,
+                    mesh: &mesh,
+                    frame: &frame,
+                    scratch: &mut scratch,
+                },
+                method: Method::Dqs,
+                first_vertex: 0,
+                count: n,
+                rest_normals: Some(&normals),
+                rest_tangents: Some(&tangents),
+                layout,
+                out: &mut vbo,
+            }
+            .run()
+            .unwrap();
+        }
         // Error paths do not allocate either.
         assert!(frame.set_pose(&model, &bad).is_err());
+        assert!(frame.set_engine_pose(&model, &map, &engine[1..]).is_err());
     });
     assert_eq!(count, 0, "the per-frame path allocated {count} times");
     // The counter works: a Vec allocates.

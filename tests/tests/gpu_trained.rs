@@ -6,11 +6,10 @@
 //! Runs on any wgpu adapter, Mesa's lavapipe included. Without one the test skips with a
 //! message, except under `CI=true`, where it fails.
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::skf::SkfView;
-use skinfield_formats::{pose_feature_count, pose_features};
-use skinfield_runtime::gpu::{GpuSkinner, SkinnedVertex, Skinning, headless_device};
+use skinfield_runtime::gpu::{GpuSkinner, SkinnedVertex, headless_device};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 use skinfield_trainer::synth::{SynthConfig, synthesize};
 use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
@@ -77,22 +76,15 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
     let cpu_mesh = BoundMesh::bind(&cpu_net, positions).unwrap();
     let mut cpu_frame = FrameState::new(&cpu_net);
     let mut scratch = Scratch::new(&cpu_net);
-    let mut features = vec![0.0; pose_feature_count(j)];
-    let mut mats = vec![Mat4::IDENTITY; j];
     let (mut cpu_p, mut cpu_n) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n]);
     let mut cpu_w = vec![0.0; n * j];
     let mut worst = 0.0f32;
     for &f in &capture.test_frames {
         let pose = &capture.poses[f];
-        pose_features(&capture.skeleton, pose, capture.up_axis, &mut features).unwrap();
-        capture.skeleton.skinning_matrices(pose, &mut mats).unwrap();
         cpu_frame.set_pose(&cpu_net, pose).unwrap();
-        for (mode, method) in [
-            (Skinning::Linear, Method::Lbs),
-            (Skinning::DualQuaternion, Method::Dqs),
-        ] {
+        for method in [Method::Lbs, Method::Dqs] {
             skinner
-                .skin(&device, &queue, &mesh, &mats, &features, mode)
+                .skin(&device, &queue, &mesh, &cpu_frame, method)
                 .unwrap();
             let weights = mesh.read_weights(&device, &queue).unwrap();
             let out: Vec<SkinnedVertex> = mesh.read_vertices(&device, &queue).unwrap();
@@ -114,7 +106,7 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
             for (k, (g, c)) in weights.iter().zip(&cpu_w).enumerate() {
                 assert!(
                     (g - c).abs() <= TOL,
-                    "frame {f} {mode:?} weight {k}: {g} vs {c}"
+                    "frame {f} {method:?} weight {k}: {g} vs {c}"
                 );
             }
             for v in 0..n {
@@ -126,7 +118,7 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
                     worst = worst.max(d);
                     assert!(
                         d <= TOL,
-                        "frame {f} {mode:?} {what} of vertex {v}: {g:?} vs {c}"
+                        "frame {f} {method:?} {what} of vertex {v}: {g:?} vs {c}"
                     );
                 }
             }

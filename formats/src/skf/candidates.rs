@@ -19,6 +19,7 @@
 
 use super::tag;
 use super::view::{SkfError, Tag};
+use alloc::vec::Vec;
 
 /// Cap on the number of anchors.
 pub const MAX_ANCHORS: usize = 1 << 22;

@@ -73,7 +73,7 @@ pub fn quantise_largest_remainder(weights: &[f32], one: u32, out: &mut [u32]) {
     let mut given: u64 = 0;
     for i in 0..n {
         let x = f64::from(weights[i].max(0.0)) / total * f64::from(one);
-        let q = x.floor();
+        let q = libm::floor(x);
         out[i] = q as u32;
         frac[i] = x - q;
         given += q as u64;

@@ -6,14 +6,13 @@
 //! [`FastSkinJob`]: crate::FastSkinJob
 //! [`TopKJob`]: crate::TopKJob
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 
 use super::GpuError;
 use super::layout::{GpuFastParams, SkinnedVertex, WORKGROUP_THREADS, entry};
-use super::skinner::{
-    GpuMesh, GpuModel, GpuSkinner, Skinning, pipeline, read_buffer, read_vertices,
-};
+use super::skinner::{GpuMesh, GpuModel, GpuSkinner, pipeline, read_buffer, read_vertices};
 use crate::fast::{FastMesh, Influence, MAX_INFLUENCES};
+use crate::{FrameState, Method};
 
 /// The fast-path pipelines (built once with the others by [`GpuSkinner::new`]).
 pub(crate) struct FastPipelines {
@@ -94,7 +93,7 @@ pub struct GpuFastMesh {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FastOutputs {
     /// Skin the vertices into [`GpuFastMesh::output`].
-    pub skinning: Option<Skinning>,
+    pub skinning: Option<Method>,
     /// Write the top-k indices and weights ([`GpuFastMesh::top_k_buffers`]).
     pub top_k: bool,
 }
@@ -331,16 +330,15 @@ impl GpuSkinner {
         })
     }
 
-    /// Writes one frame's inputs (as [`GpuSkinner::upload_frame`]): the skinning matrices and
-    /// the pose features.
+    /// Writes one frame's inputs from a posed [`FrameState`] (as
+    /// [`GpuSkinner::upload_frame`]).
     pub fn upload_fast_frame(
         &self,
         queue: &wgpu::Queue,
         mesh: &GpuFastMesh,
-        skinning: &[Mat4],
-        features: &[f32],
+        frame: &FrameState,
     ) -> Result<(), GpuError> {
-        self.upload_frame(queue, &mesh.nodes, skinning, features)
+        self.upload_frame(queue, &mesh.nodes, frame)
     }
 
     /// Records one fast frame into the caller's encoder: pose terms and SkinNet at the nodes,
@@ -370,12 +368,12 @@ impl GpuSkinner {
         self.dispatch(&mut pass, mesh.node_count.div_ceil(WORKGROUP_THREADS));
         let vertex_groups = mesh.vertex_count.div_ceil(WORKGROUP_THREADS);
         match outputs.skinning {
-            Some(Skinning::Linear) => {
+            Some(Method::Lbs) => {
                 pass.set_pipeline(&p.lbs);
                 pass.set_bind_group(0, &mesh.bind_lbs, &[]);
                 self.dispatch(&mut pass, vertex_groups);
             }
-            Some(Skinning::DualQuaternion) => {
+            Some(Method::Dqs) => {
                 pass.set_pipeline(&self.joint_dqs);
                 pass.set_bind_group(0, &mesh.nodes.bind_joint_dqs, &[]);
                 self.dispatch(
@@ -402,11 +400,10 @@ impl GpuSkinner {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         mesh: &GpuFastMesh,
-        skinning: &[Mat4],
-        features: &[f32],
+        frame: &FrameState,
         outputs: FastOutputs,
     ) -> Result<wgpu::SubmissionIndex, GpuError> {
-        self.upload_fast_frame(queue, mesh, skinning, features)?;
+        self.upload_fast_frame(queue, mesh, frame)?;
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("skinfield fast frame"),
         });

@@ -8,8 +8,10 @@
 //!   packed in pairs and read with `unpack2x16float`; f32 weights stay f32).
 //! - [`GpuSkinner::bind_mesh`] uploads a mesh's canonical positions and normals and computes,
 //!   once, the position part of the two input-fed layers (layer 0 and the skip layer).
-//! - Per frame, [`GpuSkinner::upload_frame`] writes only the skinning matrices and the pose
-//!   features; [`GpuSkinner::encode`] records the pose terms, SkinNet (tiles of 16 vertices
+//! - Per frame, the pose goes through the CPU's [`crate::FrameState`] (the same
+//!   [`crate::Pose`] or engine-order transforms and [`crate::JointMap`] as the CPU path);
+//!   [`GpuSkinner::upload_frame`] writes only its skinning matrices and pose features;
+//!   [`GpuSkinner::encode`] records the pose terms, SkinNet (tiles of 16 vertices
 //!   per workgroup, activations in workgroup memory), softmax and LBS or DQS into the caller's
 //!   command encoder, writing [`GpuMesh::output`], a `STORAGE | VERTEX` buffer of
 //!   [`SkinnedVertex`] the engine can draw from.
@@ -28,7 +30,7 @@ pub use layout::{
     GpuFastParams, GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
     WORKGROUP_THREADS, WeightFormat, shader_source,
 };
-pub use skinner::{GpuMesh, GpuModel, GpuSkinner, Skinning, position_encoding};
+pub use skinner::{GpuMesh, GpuModel, GpuSkinner, position_encoding};
 
 /// Why a GPU operation failed.
 #[derive(Debug, thiserror::Error)]
@@ -107,6 +109,9 @@ pub enum GpuError {
         /// The kernels' requirement.
         required: u64,
     },
+    /// The frame state is not usable (no pose yet).
+    #[error("frame: {0}")]
+    Frame(#[from] crate::RuntimeError),
     /// Mapping a read-back buffer failed.
     #[error("GPU read-back: {0}")]
     Map(#[from] wgpu::BufferAsyncError),

@@ -14,15 +14,7 @@ use super::layout::{
     WORKGROUP_THREADS, WeightFormat, entry, shader_source,
 };
 use crate::candidates::AnchorSet;
-
-/// Which skinning the frame uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Skinning {
-    /// Linear blend skinning of the skinning matrices.
-    Linear,
-    /// Dual quaternion skinning (Kavan et al. 2007); the skinning matrices must be rigid.
-    DualQuaternion,
-}
+use crate::{FrameState, Method, RuntimeError};
 
 struct FormatPipelines {
     position_terms: wgpu::ComputePipeline,
@@ -583,9 +575,24 @@ impl GpuSkinner {
         Ok(mesh)
     }
 
-    /// Writes one frame's inputs: the skinning matrices (`world · inverse_bind`, one per joint)
-    /// and the pose features (`skinfield_formats::pose_features`, 3 per joint).
+    /// Writes one frame's inputs from a posed [`FrameState`] (the same
+    /// [`FrameState::set_pose`] / [`FrameState::set_engine_pose`] as the CPU path): its skinning
+    /// matrices and pose features. A frame without a pose is refused.
     pub fn upload_frame(
+        &self,
+        queue: &wgpu::Queue,
+        mesh: &GpuMesh,
+        frame: &FrameState,
+    ) -> Result<(), GpuError> {
+        if !frame.is_ready() {
+            return Err(GpuError::Frame(RuntimeError::NoPose));
+        }
+        self.upload_raw(queue, mesh, frame.palette().matrices(), frame.features())
+    }
+
+    /// Writes one frame's inputs given directly: the skinning matrices (`world · inverse_bind`,
+    /// one per joint) and the pose features (`skinfield_formats::pose_features`, 3 per joint).
+    pub fn upload_raw(
         &self,
         queue: &wgpu::Queue,
         mesh: &GpuMesh,
@@ -616,20 +623,20 @@ impl GpuSkinner {
     /// Records one frame into the caller's encoder: pose terms, SkinNet and softmax, then LBS or
     /// DQS into [`GpuMesh::output`]. The frame's inputs come from the last
     /// [`GpuSkinner::upload_frame`] (queue writes land before the next submission).
-    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, mesh: &GpuMesh, mode: Skinning) {
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, mesh: &GpuMesh, method: Method) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("skinfield frame"),
             timestamp_writes: None,
         });
         self.encode_weights(&mut pass, mesh);
         let vertex_groups = mesh.vertex_count.div_ceil(WORKGROUP_THREADS);
-        match mode {
-            Skinning::Linear => {
+        match method {
+            Method::Lbs => {
                 pass.set_pipeline(&self.lbs);
                 pass.set_bind_group(0, &mesh.bind_lbs, &[]);
                 self.dispatch(&mut pass, vertex_groups);
             }
-            Skinning::DualQuaternion => {
+            Method::Dqs => {
                 pass.set_pipeline(&self.joint_dqs);
                 pass.set_bind_group(0, &mesh.bind_joint_dqs, &[]);
                 self.dispatch(
@@ -660,15 +667,14 @@ impl GpuSkinner {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         mesh: &GpuMesh,
-        skinning: &[Mat4],
-        features: &[f32],
-        mode: Skinning,
+        frame: &FrameState,
+        method: Method,
     ) -> Result<wgpu::SubmissionIndex, GpuError> {
-        self.upload_frame(queue, mesh, skinning, features)?;
+        self.upload_frame(queue, mesh, frame)?;
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("skinfield frame"),
         });
-        self.encode(&mut encoder, mesh, mode);
+        self.encode(&mut encoder, mesh, method);
         Ok(queue.submit([encoder.finish()]))
     }
 }

@@ -25,7 +25,7 @@ pub(crate) use blend::blend;
 /// Vertices per tile (the GEMM's N dimension).
 pub const TILE: usize = 32;
 /// Output rows per weight panel (the GEMM's M blocking).
-pub const MR: usize = 8;
+pub(crate) const MR: usize = 8;
 
 /// Which implementation evaluates the layers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -12,14 +12,18 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow, bail};
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use serde::Serialize;
 use skinfield_formats::Pose;
 use skinfield_formats::gltf_io::{Clip, GltfDocument, GltfSkin, PrimitiveInfo, load_gltf};
 use skinfield_formats::skf::{SkfView, read_skf_file, write_atomic};
 use skinfield_runtime::{
-    BoundMesh, FrameState, Method, Palette, Scratch, SkinJob, SkinNetModel, StaticSkinJob,
+    BoundMesh, FrameState, JointMap, Method, Palette, Scratch, SkinJob, SkinNetModel, StaticSkinJob,
 };
+
+/// Largest relative difference between the per-joint bind-space transforms of a skin and a
+/// model that still counts as one bind pose (f32 inverse bind matrices agree to ~1e-6).
+const BIND_TOLERANCE: f32 = 1e-3;
 
 /// Arguments of `trainer pose`.
 #[derive(clap::Args, Debug)]
@@ -102,21 +106,34 @@ pub fn find_clip<'d>(doc: &'d GltfDocument, key: &str) -> anyhow::Result<&'d Cli
         .ok_or_else(|| anyhow!("clip index {i} out of range ({} clips)", doc.clips.len()))
 }
 
-/// For `model`, the skin it drives and, per model joint, the skin's joint of the same name.
-fn match_model(doc: &GltfDocument, model: &SkinNetModel) -> anyhow::Result<(usize, Vec<usize>)> {
-    let names = model.skeleton().names();
+/// For `model`, the skin it drives (the first whose joints name every model joint, with the
+/// same hierarchy and bind pose), the map from the skin's joint order to the model's, and the
+/// transform from the skin's bind space to the model's canonical space, as an engine does.
+fn match_model(
+    doc: &GltfDocument,
+    model: &SkinNetModel,
+) -> anyhow::Result<(usize, JointMap, Mat4)> {
+    let mut reasons = Vec::new();
     for (s, skin) in doc.skins.iter().enumerate() {
-        if skin.skeleton.len() != names.len() {
-            continue;
-        }
-        let map: Option<Vec<usize>> = names.iter().map(|n| skin.skeleton.find(n)).collect();
-        if let Some(map) = map {
-            return Ok((s, map));
+        let names = skin.skeleton.names();
+        let matched = JointMap::new(model.skeleton(), names).and_then(|map| {
+            map.check_parents(model.skeleton(), names, skin.skeleton.parents())?;
+            let to_model = map.bind_space(
+                model.skeleton(),
+                skin.skeleton.inverse_bind(),
+                BIND_TOLERANCE,
+            )?;
+            Ok((map, to_model))
+        });
+        match matched {
+            Ok((map, to_model)) => return Ok((s, map, to_model)),
+            Err(e) => reasons.push(format!("skin {s}: {e}")),
         }
     }
     bail!(
-        "--model: its skeleton ({} joints) matches no skin of the asset by joint names",
-        names.len()
+        "--model: its skeleton ({} joints) matches no skin of the asset by joint names ({})",
+        model.joint_count(),
+        reasons.join("; ")
     )
 }
 
@@ -144,7 +161,15 @@ pub fn pose_frames(
     order.sort_by_key(|&(s, p)| (p.mesh, p.primitive, s));
     let driven = model.map(|m| match_model(doc, m)).transpose()?;
     let bound = match (model, &driven) {
-        (Some(m), Some((s, _))) => Some(BoundMesh::bind(m, &doc.skins[*s].template.positions)?),
+        (Some(m), Some((s, _, to_model))) => {
+            let positions: Vec<Vec3> = doc.skins[*s]
+                .template
+                .positions
+                .iter()
+                .map(|&p| to_model.transform_point3(p))
+                .collect();
+            Some(BoundMesh::bind(m, &positions)?)
+        }
         _ => None,
     };
     let mut frames = Vec::with_capacity(times.len());
@@ -153,7 +178,7 @@ pub fn pose_frames(
         for (s, skin) in doc.skins.iter().enumerate() {
             let pose = clip.sample(skin, t);
             let out = match (model, &driven, &bound) {
-                (Some(m), Some((ms, map)), Some(mesh)) if *ms == s => {
+                (Some(m), Some((ms, map, _)), Some(mesh)) if *ms == s => {
                     skin_with_model(m, map, mesh, &pose, method)?
                 }
                 _ => skin_static(skin, &pose, method)?,
@@ -193,16 +218,13 @@ fn skin_static(skin: &GltfSkin, pose: &Pose, method: Method) -> anyhow::Result<V
 
 fn skin_with_model(
     model: &SkinNetModel,
-    map: &[usize],
+    map: &JointMap,
     mesh: &BoundMesh,
     pose: &Pose,
     method: Method,
 ) -> anyhow::Result<Vec<Vec3>> {
-    let reordered = Pose {
-        locals: map.iter().map(|&j| pose.locals[j]).collect(),
-    };
     let mut frame = FrameState::new(model);
-    frame.set_pose(model, &reordered)?;
+    frame.set_engine_pose(model, map, &pose.locals)?;
     let mut out = vec![Vec3::ZERO; mesh.vertex_count()];
     SkinJob {
         model,
