@@ -4,8 +4,8 @@
 //! zero-copy [`skf`] weight-file view) is `no_std` + `alloc`; readers and writers that touch
 //! files (glTF, BVH, capture manifest, images, the `.skf` writer) need the `std` feature.
 //!
-//! Conventions (see `DESIGN.md`): right-handed, +Y up, metres; quaternions are glam's
-//! `(x, y, z, w)`; matrices are column-major; joints are stored in topological order
+//! Conventions (see `docs/design.md`, *Conventions*): right-handed, +Y up, metres; quaternions
+//! are glam's `(x, y, z, w)`; matrices are column-major; joints are stored in topological order
 //! (a parent's index is smaller than its children's).
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
