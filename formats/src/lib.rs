@@ -5,8 +5,8 @@
 //! file writer and reader, and the `import` feature the offline readers and writers (glTF, BVH,
 //! capture manifest, images, MakeHuman), so an engine's build never compiles a parser.
 //!
-//! Conventions (see `DESIGN.md`): right-handed, +Y up, metres; quaternions are glam's
-//! `(x, y, z, w)`; matrices are column-major; joints are stored in topological order
+//! Conventions (see `docs/design.md`, *Conventions*): right-handed, +Y up, metres; quaternions
+//! are glam's `(x, y, z, w)`; matrices are column-major; joints are stored in topological order
 //! (a parent's index is smaller than its children's).
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]

@@ -1,4 +1,5 @@
-//! Poses and the pose features `θ̃` that SkinNet takes as input (DESIGN.md).
+//! Poses and the pose features `θ̃` that SkinNet takes as input (see `docs/design.md`,
+//! *Pose features*).
 //!
 //! One function, [`pose_features`], is used by the trainer and the runtime alike, so the
 //! encoding cannot drift between them; [`POSE_FEATURE_ENCODING`] is recorded in the `.skf`.

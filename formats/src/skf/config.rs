@@ -74,7 +74,8 @@ pub struct ModelConfig {
 }
 
 impl ModelConfig {
-    /// The paper's architecture (supplementary D, DESIGN.md) for `joint_count` joints.
+    /// The paper's architecture (supplementary D; see `docs/design.md`, *Network*) for
+    /// `joint_count` joints.
     #[must_use]
     pub fn vinecs(joint_count: u32, bbox_min: [f32; 3], bbox_max: [f32; 3]) -> Self {
         let mut hidden = [0; MAX_HIDDEN_LAYERS];
@@ -279,7 +280,7 @@ mod tests {
                 (24, 256)
             ]
         );
-        // DESIGN.md: ≈ 0.49 MFLOP per vertex for J = 24, L = 6.
+        // `docs/design.md`, *Network*: ≈ 0.49 MFLOP per vertex for J = 24, L = 6.
         let mflop = 2.0 * c.macs_per_vertex(Net::Skin) as f64 / 1e6;
         assert!((mflop - 0.49).abs() < 0.01, "{mflop}");
         assert_eq!(ModelConfig::from_bytes(&c.to_bytes()), Ok(c));

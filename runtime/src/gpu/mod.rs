@@ -1,6 +1,6 @@
 //! SkinNet and skinning on the GPU (wgpu compute shaders, feature `gpu`).
 //!
-//! The same steps as the CPU path (DESIGN.md "Runtime shape"), on a [`wgpu::Device`] and
+//! The same steps as the CPU path (see `docs/design.md`, *Runtime*), on a [`wgpu::Device`] and
 //! [`wgpu::Queue`] that the caller (the engine) owns:
 //!
 //! - [`GpuSkinner::new`] builds the pipelines once from the WGSL in `shaders/`.

@@ -1,4 +1,4 @@
-//! Evaluation against ground truth (paper §4, `DESIGN.md` "Evaluation").
+//! Evaluation against ground truth (paper §4; see `docs/design.md`, *Evaluation*).
 //!
 //! For every test frame of a capture, the template is posed with the skinning under test and
 //! compared with the ground-truth posed mesh: M2S (recovered → truth), S2M (truth → recovered)

@@ -1,7 +1,8 @@
 //! Surface-to-surface distances: area-uniform sampling and the M2S / S2M / Chamfer metrics.
 //!
 //! M2S is the mean distance from points sampled uniformly by area on the recovered surface to the
-//! ground-truth surface; S2M is the reverse; Chamfer is their sum (`DESIGN.md`, "Evaluation").
+//! ground-truth surface; S2M is the reverse; Chamfer is their sum (see `docs/design.md`,
+//! *Evaluation*).
 //! Distances are exact point-to-triangle distances found through a [`TriangleBvh`].
 
 use glam::Vec3;

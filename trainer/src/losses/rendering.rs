@@ -20,8 +20,8 @@
 //!   `−sign(r)·∇I · ∂π/∂X · b_m`: the surface point carries its colour, and the gradient moves it
 //!   to where the image shows that colour (the image-gradient or inverse-warping form). This is
 //!   not the derivative of the rendered image w.r.t. the vertices (which needs edge sampling);
-//!   it is what DESIGN.md prescribes and what the finite-difference tests check, with `b` and the
-//!   sample set held fixed.
+//!   it is what `docs/design.md` (*Losses*) describes and what the finite-difference tests check,
+//!   with `b` and the sample set held fixed.
 //!
 //! The bilinear sampler is [`sample_bilinear`] on one [`BilinearImage`] per colour channel
 //! (differentiable, edge-clamped).

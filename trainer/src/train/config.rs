@@ -152,11 +152,11 @@ pub struct TrainConfig {
     /// its cell instead of at the training vertex itself ([`super::queries`]). Measured on the
     /// built-in capture: see the module docs.
     pub full_resolution_queries: bool,
-    /// Positional-encoding frequency count L of SkinNet (and of the appearance nets); DESIGN.md's
-    /// default 6. Measured before [`Self::full_resolution_queries`] existed, demo schedule:
-    /// L = 4 scored 1.030 cm Chamfer on the novel test poses against 1.166 cm for L = 6, since
-    /// lower frequencies vary less between training vertices; the queries fix that at L = 6
-    /// (0.953 cm), so the default stays.
+    /// Positional-encoding frequency count L of SkinNet (and of the appearance nets); default 6
+    /// (see `docs/design.md`, *Positional encoding*). Measured before
+    /// [`Self::full_resolution_queries`] existed, demo schedule: L = 4 scored 1.030 cm Chamfer
+    /// on the novel test poses against 1.166 cm for L = 6, since lower frequencies vary less
+    /// between training vertices; the queries fix that at L = 6 (0.953 cm), so the default stays.
     pub pe_frequencies: u32,
     /// Huber width δ of both silhouette terms, in pixels ([`crate::losses::silhouette`]):
     /// quadratic below, linear (the paper's L1) above.
