@@ -102,15 +102,6 @@ fn fast_skin_lbs(
     skinned[v] = lbs_vertex(m, v);
 }
 
-fn lbs_vertex(m: mat4x4<f32>, v: u32) -> Vertex {
-    let p = m * vec4<f32>(rest[v].position.xyz, 1.0);
-    let c0 = m[0].xyz;
-    let c1 = m[1].xyz;
-    let c2 = m[2].xyz;
-    let cof = mat3x3<f32>(cross(c1, c2), cross(c2, c0), cross(c0, c1));
-    return Vertex(vec4<f32>(p.xyz, 1.0), vec4<f32>(unit_or_zero(cof * rest[v].normal.xyz), 0.0));
-}
-
 // Weight of joint `j` in w_v.
 fn dense_weight(v: u32, j: u32) -> f32 {
     let first = v * vertex_stride();

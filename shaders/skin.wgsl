@@ -59,6 +59,27 @@ fn frame_joint_dqs(
     joint_dqs[2u * j + 1u] = 0.5 * quat_mul(vec4<f32>(m[3].xyz, 0.0), r);
 }
 
+// Vertex `v` skinned by the blended matrix `m`: position, and the normal through the cofactor
+// matrix (det · M⁻ᵀ), correct for the non-rigid blend. Shared by every LBS kernel.
+fn lbs_vertex(m: mat4x4<f32>, v: u32) -> Vertex {
+    let p = m * vec4<f32>(rest[v].position.xyz, 1.0);
+    let c0 = m[0].xyz;
+    let c1 = m[1].xyz;
+    let c2 = m[2].xyz;
+    let cof = mat3x3<f32>(cross(c1, c2), cross(c2, c0), cross(c0, c1));
+    return Vertex(vec4<f32>(p.xyz, 1.0), vec4<f32>(unit_or_zero(cof * rest[v].normal.xyz), 0.0));
+}
+
+// The blend of vertex `v`'s SkinNet weights over the skinning matrices.
+fn blended_matrix(v: u32) -> mat4x4<f32> {
+    let j_count = params.joint_count;
+    var m = mat4x4<f32>(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
+    for (var j = 0u; j < j_count; j++) {
+        m += joint_mats[j] * skin_weights[v * j_count + j];
+    }
+    return m;
+}
+
 @compute @workgroup_size(64)
 fn skin_lbs(
     @builtin(workgroup_id) wid: vec3<u32>,
@@ -69,19 +90,7 @@ fn skin_lbs(
     if v >= params.vertex_count {
         return;
     }
-    let j_count = params.joint_count;
-    var m = mat4x4<f32>(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
-    for (var j = 0u; j < j_count; j++) {
-        m += joint_mats[j] * skin_weights[v * j_count + j];
-    }
-    let p = m * vec4<f32>(rest[v].position.xyz, 1.0);
-    // Normals transform with the cofactor matrix (det · M⁻ᵀ), correct for the non-rigid blend.
-    let c0 = m[0].xyz;
-    let c1 = m[1].xyz;
-    let c2 = m[2].xyz;
-    let cof = mat3x3<f32>(cross(c1, c2), cross(c2, c0), cross(c0, c1));
-    let n = unit_or_zero(cof * rest[v].normal.xyz);
-    skinned[v] = Vertex(vec4<f32>(p.xyz, 1.0), vec4<f32>(n, 0.0));
+    skinned[v] = lbs_vertex(blended_matrix(v), v);
 }
 
 @compute @workgroup_size(64)
@@ -115,9 +124,15 @@ fn skin_dqs(
         br += w * r;
         bd += w * joint_dqs[2u * j + 1u];
     }
-    let inv = 1.0 / length(br);
-    br *= inv;
-    bd *= inv;
+    let len = length(br);
+    if !(len > 1e-8) {
+        // Rotations that cancel (or weights that vanish): LBS of the same weights, as the CPU
+        // path and the fast path do, rather than a division by zero.
+        skinned[v] = lbs_vertex(blended_matrix(v), v);
+        return;
+    }
+    br /= len;
+    bd /= len;
     let t = 2.0 * (br.w * bd.xyz - bd.w * br.xyz + cross(br.xyz, bd.xyz));
     let p = quat_rotate(br, rest[v].position.xyz) + t;
     let n = unit_or_zero(quat_rotate(br, rest[v].normal.xyz));

@@ -20,7 +20,6 @@ use skinfield_formats::{Pose, pose_features};
 use skinfield_runtime::parallel::run_parallel;
 use skinfield_runtime::{
     BoundMesh, FrameState, Kernel, Method, Scratch, SkinJob, SkinNetModel, WeightsJob,
-    positional_encoding,
 };
 
 const SIZES: [usize; 3] = [1_000, 10_000, 50_000];
@@ -161,21 +160,11 @@ impl CandleNet {
         let view = SkfView::parse(bytes).expect("view");
         let c = *view.config();
         let dev = Device::Cpu;
-        let pw = c.position_width();
         let mut theta = vec![0.0; c.pose_width()];
         pose_features(model.skeleton(), pose, c.up_axis, &mut theta).expect("features");
         let mut input = Vec::with_capacity(pts.len() * c.input_width(Net::Skin));
-        let mut pe = vec![0.0; pw];
         for p in pts {
-            let lo = Vec3::from_array(c.bbox_min);
-            let hi = Vec3::from_array(c.bbox_max);
-            positional_encoding(
-                2.0 * (*p - lo) / (hi - lo) - Vec3::ONE,
-                c.pe_frequencies as usize,
-                &mut pe,
-            )
-            .expect("pe");
-            input.extend_from_slice(&pe);
+            input.extend(c.position_input(*p));
             input.extend_from_slice(&theta);
         }
         let input =

@@ -8,7 +8,6 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 use glam::Vec3;
-use skinfield_formats::skf::ModelConfig;
 
 use crate::error::RuntimeError;
 use crate::kernels::TILE;
@@ -16,42 +15,6 @@ use crate::model::SkinNet;
 
 /// Largest vertex count a mesh may have.
 pub const MAX_BIND_VERTICES: usize = 1 << 24;
-
-/// `x̂ = 2(x̄ − min)/(max − min) − 1` with the file's canonical bounding box.
-#[must_use]
-pub(crate) fn normalise(config: &ModelConfig, x: Vec3) -> Vec3 {
-    let lo = Vec3::from_array(config.bbox_min);
-    let hi = Vec3::from_array(config.bbox_max);
-    2.0 * (x - lo) / (hi - lo) - Vec3::ONE
-}
-
-/// The network's position input `[x̂, γ(x̂)]` into `out` (`3 + 6L` floats):
-/// `x̂`, then for `k in 0..L`: `sin(2^k π x̂)` (3), `cos(2^k π x̂)` (3). Evaluated in f64 and
-/// rounded, so it is the correctly rounded value of the definition.
-pub fn positional_encoding(
-    x_hat: Vec3,
-    frequencies: usize,
-    out: &mut [f32],
-) -> Result<(), RuntimeError> {
-    let expected = 3 + 6 * frequencies;
-    if out.len() != expected {
-        return Err(RuntimeError::BufferLength {
-            field: "out",
-            len: out.len(),
-            expected,
-        });
-    }
-    out[..3].copy_from_slice(&x_hat.to_array());
-    for k in 0..frequencies {
-        let f = libm::ldexp(core::f64::consts::PI, k as i32);
-        for c in 0..3 {
-            let a = f * f64::from(x_hat[c]);
-            out[3 + 6 * k + c] = libm::sin(a) as f32;
-            out[6 + 6 * k + c] = libm::cos(a) as f32;
-        }
-    }
-    Ok(())
-}
 
 /// A mesh bound to one model: rest positions and the per-vertex position parts, tile by tile.
 #[derive(Clone, Debug)]
@@ -90,17 +53,15 @@ impl BoundMesh {
         let mut pre = vec![0.0; tiles * block];
         let zeros = vec![0.0; layout.max_rows_p];
         let mut pe = vec![0.0; pos_w * TILE];
-        let mut one = vec![0.0; pos_w];
-        let freqs = model.config().pe_frequencies as usize;
         for (t, out) in pre.chunks_exact_mut(block).enumerate() {
             pe.fill(0.0);
             for (lane, p) in positions[t * TILE..n.min((t + 1) * TILE)]
                 .iter()
                 .enumerate()
             {
-                positional_encoding(normalise(model.config(), *p), freqs, &mut one)?;
-                for (f, v) in one.iter().enumerate() {
-                    pe[f * TILE + lane] = *v;
+                // The one encoding the trainer and the GPU upload use too.
+                for (f, v) in model.config().position_input(*p).enumerate() {
+                    pe[f * TILE + lane] = v;
                 }
             }
             model.position_parts(&pe, &zeros, out);

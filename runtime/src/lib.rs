@@ -8,7 +8,9 @@
 //!    the kernels want, and picks the fastest [`Kernel`] once.
 //! 2. **Bind**: [`BoundMesh::bind`] normalises any mesh's canonical positions with the file's
 //!    bounding box and precomputes the position parts of the first layer and of the skip layer.
-//! 3. **Per frame**: [`FrameState::set_pose`] runs forward kinematics, the pose features
+//! 3. **Per frame**: [`FrameState::set_pose`] (or [`FrameState::set_engine_pose`], the
+//!    engine's own joint order through a [`JointMap`] built once by name) runs forward
+//!    kinematics, the pose features
 //!    ([`skinfield_formats::pose_features`]) and the pose parts of those two layers, once.
 //!    [`SkinJob`] then evaluates the MLP over tiles of [`TILE`] vertices, blends the joints
 //!    (LBS or DQS) and writes positions, normals, tangents and optionally the weights, over any
@@ -19,11 +21,15 @@
 //!    [`FastFrame::update`] evaluates SkinNet at those nodes only and [`FastSkinJob`] /
 //!    [`TopKJob`] give every vertex interpolated weights (skinned, or as the top-k influences
 //!    an engine's own skinning shader takes), so the MLP cost no longer grows with the mesh.
-//! 6. **Level of detail** (`resample` feature): the `resample` module simplifies or subdivides
+//! 6. **Engine buffers**: [`InterleavedJob`] writes any of the above straight into an
+//!    interleaved vertex buffer (stride and offsets in a [`VertexLayout`]); the `gpu` module
+//!    runs the same frames on the engine's wgpu device from the same [`FrameState`].
+//! 7. **Level of detail** (`resample` feature): the `resample` module simplifies or subdivides
 //!    a canonical mesh at load time; the result binds like any other mesh, same weight file.
 //!
 //! No function here panics on any input: bad slices, NaN poses and mismatched parts are typed
-//! [`RuntimeError`]s naming the field.
+//! [`RuntimeError`]s naming the field (the GPU returns the same errors for the same inputs).
+//! `docs/embedding.md` walks through an engine integration, from Rust and from C.
 #![cfg_attr(not(feature = "std"), no_std)]
 
 extern crate alloc;
@@ -48,7 +54,7 @@ pub mod resample;
 mod skinning;
 mod static_job;
 
-pub use bind::{BoundMesh, MAX_BIND_VERTICES, positional_encoding};
+pub use bind::{BoundMesh, MAX_BIND_VERTICES};
 pub use error::RuntimeError;
 pub use fast::{
     FastFrame, FastMesh, FastOptions, FastSkinJob, Influence, TopKIndices, TopKJob, TopKWeights,

@@ -9,6 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{Candidates, ModelConfig, Net, SkfModel, SkfView};
 use skinfield_formats::{Pose, Skeleton, Transform, UpAxis, pose_feature_count, pose_features};
+use skinfield_runtime::RuntimeError;
 use skinfield_runtime::gpu::{GpuError, GpuSkinner, SkinnedVertex, WeightFormat, headless_device};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
 
@@ -591,41 +592,41 @@ fn bad_inputs_are_typed_errors() {
     let model = skinner.bind_model(&device, &view).unwrap();
     assert!(matches!(
         skinner.bind_mesh(&device, &queue, &model, &[], &[]),
-        Err(GpuError::EmptyMesh)
+        Err(GpuError::Input(RuntimeError::VertexCount(0)))
     ));
     let p = [Vec3::ZERO, Vec3::ONE];
     assert!(matches!(
         skinner.bind_mesh(&device, &queue, &model, &p, &p[..1]),
-        Err(GpuError::Length {
+        Err(GpuError::Input(RuntimeError::BufferLength {
             field: "normals",
             len: 1,
             expected: 2
-        })
+        }))
     ));
     let bad = [Vec3::ZERO, Vec3::new(0.0, f32::NAN, 0.0)];
     assert!(matches!(
         skinner.bind_mesh(&device, &queue, &model, &bad, &p),
-        Err(GpuError::NonFinite {
+        Err(GpuError::Input(RuntimeError::NonFinite {
             field: "positions",
             index: 1
-        })
+        }))
     ));
     let mesh = skinner.bind_mesh(&device, &queue, &model, &p, &p).unwrap();
     let mats = vec![Mat4::IDENTITY; skeleton.len()];
     let feats = vec![0.0; pose_feature_count(skeleton.len())];
     assert!(matches!(
         skinner.upload_raw(&queue, &mesh, &mats[1..], &feats),
-        Err(GpuError::Length {
+        Err(GpuError::Input(RuntimeError::BufferLength {
             field: "skinning matrices",
             ..
-        })
+        }))
     ));
     assert!(matches!(
         skinner.upload_raw(&queue, &mesh, &mats, &feats[1..]),
-        Err(GpuError::Length {
+        Err(GpuError::Input(RuntimeError::BufferLength {
             field: "pose features",
             ..
-        })
+        }))
     ));
     skinner.upload_raw(&queue, &mesh, &mats, &feats).unwrap();
     // A frame state that was never posed (or whose last pose failed) is refused.
@@ -633,6 +634,6 @@ fn bad_inputs_are_typed_errors() {
     let frame = FrameState::new(&cpu_net);
     assert!(matches!(
         skinner.upload_frame(&queue, &mesh, &frame),
-        Err(GpuError::Frame(skinfield_runtime::RuntimeError::NoPose))
+        Err(GpuError::Input(RuntimeError::NoPose))
     ));
 }

@@ -7,6 +7,7 @@ mod common;
 
 use glam::Vec3;
 use skinfield_formats::skf::SkfView;
+use skinfield_runtime::RuntimeError;
 use skinfield_runtime::gpu::{
     FastOutputs, GpuError, GpuFastOptions, GpuSkinner, TopKIndexFormat, TopKWeightFormat,
     headless_device,
@@ -267,19 +268,19 @@ fn fast_bad_inputs_are_typed_errors() {
     let d = GpuFastOptions::default();
     assert!(matches!(
         bind(&c.normals[1..], d),
-        Some(GpuError::Length {
+        Some(GpuError::Input(RuntimeError::BufferLength {
             field: "normals",
             ..
-        })
+        }))
     ));
     let mut nan = c.normals.clone();
     nan[3].x = f32::NAN;
     assert!(matches!(
         bind(&nan, d),
-        Some(GpuError::NonFinite {
+        Some(GpuError::Input(RuntimeError::NonFinite {
             field: "normals",
             index: 3
-        })
+        }))
     ));
     for (o, field) in [
         (
@@ -318,11 +319,11 @@ fn fast_bad_inputs_are_typed_errors() {
         .unwrap();
     assert!(matches!(
         skinner.bind_fast_mesh(&device, &queue, &other, &c.mesh, &c.normals, &d),
-        Err(GpuError::Length {
+        Err(GpuError::Input(RuntimeError::BufferLength {
             field: "fast mesh joints",
             len: 6,
             expected: 7
-        })
+        }))
     ));
     // Top-k output from a mesh bound without a layout.
     let mesh = skinner
@@ -355,9 +356,9 @@ fn fast_bad_inputs_are_typed_errors() {
         .unwrap();
     assert!(matches!(
         skinner.upload_fast_frame(&queue, &mesh, &frame),
-        Err(GpuError::Length {
+        Err(GpuError::Input(RuntimeError::BufferLength {
             field: "skinning matrices",
             ..
-        })
+        }))
     ));
 }

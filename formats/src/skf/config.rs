@@ -1,5 +1,7 @@
 //! The CONF section: what the runtime needs to rebuild SkinNet's forward pass.
 
+use glam::Vec3;
+
 use crate::pose::{POSE_FEATURE_ENCODING, UpAxis, pose_feature_count};
 
 use super::{CONF_LEN, MAX_HIDDEN_LAYERS, MAX_LAYER_WIDTH, MAX_PE_FREQUENCIES};
@@ -105,6 +107,32 @@ impl ModelConfig {
     #[must_use]
     pub fn position_width(&self) -> usize {
         3 + 6 * self.pe_frequencies as usize
+    }
+
+    /// The canonical point `x̄` in the network's input box: `x̂ = 2(x̄ − min)/(max − min) − 1`
+    /// with the file's bounding box (f32).
+    #[must_use]
+    pub fn normalise(&self, x: Vec3) -> Vec3 {
+        let lo = Vec3::from_array(self.bbox_min);
+        let hi = Vec3::from_array(self.bbox_max);
+        2.0 * (x - lo) / (hi - lo) - Vec3::ONE
+    }
+
+    /// The network's position input `[x̂, γ(x̂)]` of the canonical point `x̄`
+    /// ([`ModelConfig::position_width`] values): `x̂`, then for `k < L` `sin(2^k π x̂)` (3) and
+    /// `cos(2^k π x̂)` (3). The sines are taken in f64 of the f32 `x̂` (libm) and rounded: at
+    /// `k = 5` the argument is ~100 rad, where f32 would lose ~1e-5. The one implementation the
+    /// trainer, the CPU runtime and the GPU upload share, so their inputs are bit-identical.
+    pub fn position_input(&self, x: Vec3) -> impl Iterator<Item = f32> + use<> {
+        let xh = self.normalise(x).to_array();
+        let waves = (0..self.pe_frequencies as i32).flat_map(move |k| {
+            let f = libm::ldexp(core::f64::consts::PI, k);
+            let arg = move |c: usize| f * f64::from(xh[c]);
+            (0..3)
+                .map(move |c| libm::sin(arg(c)) as f32)
+                .chain((0..3).map(move |c| libm::cos(arg(c)) as f32))
+        });
+        xh.into_iter().chain(waves)
     }
 
     /// Width of the pose features: `3J`.

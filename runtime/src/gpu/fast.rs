@@ -12,7 +12,7 @@ use super::GpuError;
 use super::layout::{GpuFastParams, SkinnedVertex, WORKGROUP_THREADS, entry};
 use super::skinner::{GpuMesh, GpuModel, GpuSkinner, pipeline, read_buffer, read_vertices};
 use crate::fast::{FastMesh, Influence, MAX_INFLUENCES};
-use crate::{FrameState, Method};
+use crate::{FrameState, Method, RuntimeError};
 
 /// The fast-path pipelines (built once with the others by [`GpuSkinner::new`]).
 pub(crate) struct FastPipelines {
@@ -122,24 +122,24 @@ impl GpuSkinner {
         let v_count = mesh.vertex_count();
         let j = mesh.joint_count();
         if model.config().joint_count as usize != j {
-            return Err(GpuError::Length {
+            return Err(GpuError::Input(RuntimeError::BufferLength {
                 field: "fast mesh joints",
                 len: j,
                 expected: model.config().joint_count as usize,
-            });
+            }));
         }
         if normals.len() != v_count {
-            return Err(GpuError::Length {
+            return Err(GpuError::Input(RuntimeError::BufferLength {
                 field: "normals",
                 len: normals.len(),
                 expected: v_count,
-            });
+            }));
         }
         if let Some(index) = normals.iter().position(|n| !n.is_finite()) {
-            return Err(GpuError::NonFinite {
+            return Err(GpuError::Input(RuntimeError::NonFinite {
                 field: "normals",
                 index,
-            });
+            }));
         }
         if !(1..=MAX_INFLUENCES).contains(&options.dqs_influences) {
             return Err(setting("dqs_influences", options.dqs_influences, "1..=8"));

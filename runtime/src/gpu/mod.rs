@@ -58,16 +58,6 @@ pub enum GpuError {
         /// Dimensions the configuration implies.
         expected: [u32; 2],
     },
-    /// An input slice has the wrong length.
-    #[error("{field}: length {len}, expected {expected}")]
-    Length {
-        /// Which input.
-        field: &'static str,
-        /// Its length.
-        len: usize,
-        /// The required length.
-        expected: usize,
-    },
     /// A fast-path setting the kernels do not accept.
     #[error("{field} = {value}: accepted {accepted}")]
     Setting {
@@ -77,17 +67,6 @@ pub enum GpuError {
         value: usize,
         /// What is accepted.
         accepted: &'static str,
-    },
-    /// A mesh without vertices.
-    #[error("mesh: no vertices")]
-    EmptyMesh,
-    /// A non-finite mesh coordinate.
-    #[error("mesh: {field}[{index}] is not finite")]
-    NonFinite {
-        /// `positions` or `normals`.
-        field: &'static str,
-        /// Vertex index.
-        index: usize,
     },
     /// A buffer or dispatch would exceed the device's limits.
     #[error("{what}: {value} exceeds the device limit {limit}")]
@@ -109,9 +88,10 @@ pub enum GpuError {
         /// The kernels' requirement.
         required: u64,
     },
-    /// The frame state is not usable (no pose yet).
-    #[error("frame: {0}")]
-    Frame(#[from] crate::RuntimeError),
+    /// An input refused by the same checks, with the same error, as on the CPU: a wrong
+    /// length, a NaN, an empty mesh, a frame state without a pose.
+    #[error(transparent)]
+    Input(#[from] crate::RuntimeError),
     /// Mapping a read-back buffer failed.
     #[error("GPU read-back: {0}")]
     Map(#[from] wgpu::BufferAsyncError),

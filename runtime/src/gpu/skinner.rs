@@ -101,24 +101,13 @@ fn split_dispatch(groups: u32, max: u32) -> (u32, u32) {
     }
 }
 
-/// `[x̂, γ(x̂)]` of every position in f64, rounded to f32, appended to `out`: `x̂` maps the
-/// configuration's bounding box to [-1, 1]³, then for k < L `sin(2^k π x̂)` (3) and
-/// `cos(2^k π x̂)` (3). Done on the CPU because WGSL's `sin`/`cos` are only accurate to about
-/// 2⁻¹¹ and only near zero.
+/// `[x̂, γ(x̂)]` of every position ([`ModelConfig::position_input`], the CPU path's and the
+/// trainer's encoding) appended to `out`. Done on the CPU because WGSL's `sin`/`cos` are only
+/// accurate to about 2⁻¹¹ and only near zero.
 pub fn position_encoding(config: &ModelConfig, positions: &[Vec3], out: &mut Vec<f32>) {
     out.reserve(positions.len() * config.position_width());
-    for p in positions {
-        let mut xh = [0f64; 3];
-        for (k, x) in xh.iter_mut().enumerate() {
-            let (lo, hi) = (f64::from(config.bbox_min[k]), f64::from(config.bbox_max[k]));
-            *x = 2.0 * (f64::from(p[k]) - lo) / (hi - lo) - 1.0;
-        }
-        out.extend(xh.iter().map(|&x| x as f32));
-        for f in 0..config.pe_frequencies {
-            let s = f64::from(1u32 << f) * core::f64::consts::PI;
-            out.extend(xh.iter().map(|&x| (s * x).sin() as f32));
-            out.extend(xh.iter().map(|&x| (s * x).cos() as f32));
-        }
+    for &p in positions {
+        out.extend(config.position_input(p));
     }
 }
 
@@ -432,18 +421,18 @@ impl GpuSkinner {
     ) -> Result<GpuMesh, GpuError> {
         let v_count = positions.len();
         if v_count == 0 {
-            return Err(GpuError::EmptyMesh);
+            return Err(GpuError::Input(RuntimeError::VertexCount(0)));
         }
         if normals.len() != v_count {
-            return Err(GpuError::Length {
+            return Err(GpuError::Input(RuntimeError::BufferLength {
                 field: "normals",
                 len: normals.len(),
                 expected: v_count,
-            });
+            }));
         }
         for (field, data) in [("positions", positions), ("normals", normals)] {
             if let Some(index) = data.iter().position(|p| !p.is_finite()) {
-                return Err(GpuError::NonFinite { field, index });
+                return Err(GpuError::Input(RuntimeError::NonFinite { field, index }));
             }
         }
         let vertex_count = u32::try_from(v_count).map_err(|_| GpuError::TooLarge {
@@ -552,7 +541,7 @@ impl GpuSkinner {
             bind_joint_dqs: group(&self.joint_dqs, &[0, 7, 9]),
             bind_skinnet: group(&pipes.skinnet, &[0, 1, 2, 4, 5, 8, 10, 20]),
             bind_lbs: group(&self.lbs, &[0, 7, 10, 11, 12]),
-            bind_dqs: group(&self.dqs, &[0, 9, 10, 11, 12]),
+            bind_dqs: group(&self.dqs, &[0, 7, 9, 10, 11, 12]),
             features,
             joint_mats,
             joint_dqs,
@@ -585,7 +574,7 @@ impl GpuSkinner {
         frame: &FrameState,
     ) -> Result<(), GpuError> {
         if !frame.is_ready() {
-            return Err(GpuError::Frame(RuntimeError::NoPose));
+            return Err(GpuError::Input(RuntimeError::NoPose));
         }
         self.upload_raw(queue, mesh, frame.palette().matrices(), frame.features())
     }
@@ -600,18 +589,18 @@ impl GpuSkinner {
         features: &[f32],
     ) -> Result<(), GpuError> {
         if skinning.len() != mesh.joint_count {
-            return Err(GpuError::Length {
+            return Err(GpuError::Input(RuntimeError::BufferLength {
                 field: "skinning matrices",
                 len: skinning.len(),
                 expected: mesh.joint_count,
-            });
+            }));
         }
         if features.len() != mesh.pose_width {
-            return Err(GpuError::Length {
+            return Err(GpuError::Input(RuntimeError::BufferLength {
                 field: "pose features",
                 len: features.len(),
                 expected: mesh.pose_width,
-            });
+            }));
         }
         queue.write_buffer(&mesh.joint_mats, 0, bytemuck::cast_slice(skinning));
         if !features.is_empty() {

@@ -137,7 +137,7 @@ fn matrices(capture: &Capture, frame: usize) -> Result<Vec<Mat4>, EvalError> {
         .skinning_matrices(pose, &mut m)
         .map_err(|e| EvalError::Posing {
             frame,
-            source: super::PosingError::Pose(e),
+            source: super::PosingError::Runtime(e.into()),
         })?;
     Ok(m)
 }

@@ -386,15 +386,10 @@ impl PreparedSkinning {
                 bounds::best_posed_weights(capture, candidates, frame)
             }
             Weights::Net { model, path } => {
-                let mut dense = vec![0.0f32; rest.len() * model.joint_count()];
-                model
-                    .weights_for(rest, pose, &mut dense)
-                    .map_err(|e| EvalError::Skf {
-                        path: path.clone(),
-                        reason: format!("frame {frame}: {e}"),
-                    })?;
-                posing::pose_dense_lbs(&capture.skeleton, &dense, rest, pose)
-                    .map_err(|source| EvalError::Posing { frame, source })
+                posing::pose_skinnet(model, rest, pose).map_err(|e| EvalError::Skf {
+                    path: path.clone(),
+                    reason: format!("frame {frame}: {e}"),
+                })
             }
         }
     }

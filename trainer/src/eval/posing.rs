@@ -1,15 +1,18 @@
-//! Posing a template with static weights: linear blend skinning and dual-quaternion skinning.
+//! Posing a template for evaluation with the runtime's own jobs, so the benchmark scores what
+//! ships: static weights (bone heat, the learned baseline, the oracle rows, the fitted bounds)
+//! through `StaticSkinJob` under LBS or DQS, SkinNet through `BoundMesh` + `FrameState` +
+//! `SkinJob`, as an engine runs them.
 //!
-//! Written for evaluation, independently of the ground-truth deformer of the synthetic capture
-//! and of the runtime, so that an `oracle` row measures the weights and not a shared bug.
-//! LBS: `x = Σ_j w_j · S_j · x̄` with `S_j = world_j · inverse_bind_j`.
-//! DQS (Kavan et al. 2007): each `S_j` as a unit dual quaternion, blended linearly with every
-//! influence flipped into the hemisphere of the vertex's heaviest influence, normalised, applied.
-//! DQS assumes rigid skinning matrices: a scale in `S_j` is dropped (the synthetic skeletons
-//! have none).
+//! The synthetic capture's ground-truth deformer (`synth::deform`) stays a separate
+//! implementation, so an `oracle` row still compares the runtime's skinning of the true weights
+//! with another code path.
 
-use glam::{Mat4, Quat, Vec3};
-use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
+use glam::Vec3;
+use skinfield_formats::{Pose, Skeleton, SkinError, StaticSkin};
+use skinfield_runtime::{
+    BoundMesh, FrameState, Method, Palette, RuntimeError, Scratch, SkinJob, SkinNetModel,
+    StaticSkinJob,
+};
 
 /// How static weights blend the joint transforms.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -20,12 +23,24 @@ pub enum Blend {
     DualQuaternion,
 }
 
+impl From<Blend> for Method {
+    fn from(b: Blend) -> Self {
+        match b {
+            Blend::Linear => Method::Lbs,
+            Blend::DualQuaternion => Method::Dqs,
+        }
+    }
+}
+
 /// Why a mesh could not be posed.
 #[derive(Debug, thiserror::Error)]
 pub enum PosingError {
-    /// The pose does not fit the skeleton.
-    #[error("pose: {0}")]
-    Pose(#[from] SkeletonError),
+    /// The runtime refused the pose, the mesh or the model.
+    #[error("runtime: {0}")]
+    Runtime(#[from] RuntimeError),
+    /// Dense weights are not a valid skin (negative, NaN or an all-zero row).
+    #[error("weights: {0}")]
+    Weights(#[from] SkinError),
     /// The weights are for another vertex or joint count.
     #[error(
         "weights cover {weights_vertices} vertices and {weights_joints} joints, the mesh has {vertices} and the skeleton {joints}"
@@ -42,37 +57,8 @@ pub enum PosingError {
     },
 }
 
-/// A rigid transform as a unit dual quaternion `real + ε·dual`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct DualQuat {
-    real: Quat,
-    dual: Quat,
-}
-
-impl DualQuat {
-    fn from_mat4(m: &Mat4) -> Self {
-        let (_, rotation, t) = m.to_scale_rotation_translation();
-        let real = rotation.normalize();
-        // dual = ½ · (t, 0) · real
-        let dual = Quat::from_xyzw(t.x, t.y, t.z, 0.0) * real * 0.5;
-        Self { real, dual }
-    }
-
-    fn transform_point(&self, p: Vec3) -> Vec3 {
-        // Translation: 2 · dual · conj(real) (vector part) for a unit real part.
-        let t = self.dual * self.real.conjugate() * 2.0;
-        self.real * p + Vec3::new(t.x, t.y, t.z)
-    }
-}
-
-/// Skinning matrices of `pose` (one per joint).
-pub fn skinning_matrices(skeleton: &Skeleton, pose: &Pose) -> Result<Vec<Mat4>, SkeletonError> {
-    let mut m = vec![Mat4::IDENTITY; skeleton.len()];
-    skeleton.skinning_matrices(pose, &mut m)?;
-    Ok(m)
-}
-
-/// Poses `rest` (canonical positions) with static weights under `blend`.
+/// Poses `rest` (canonical positions) with static weights under `blend` (the runtime's
+/// `StaticSkinJob`).
 pub fn pose_static(
     skeleton: &Skeleton,
     skin: &StaticSkin,
@@ -88,32 +74,27 @@ pub fn pose_static(
             joints: skeleton.len(),
         });
     }
-    let mats = skinning_matrices(skeleton, pose)?;
-    Ok(match blend {
-        Blend::Linear => rest
-            .iter()
-            .enumerate()
-            .map(|(v, &x)| {
-                let (joints, weights) = skin.influences(v);
-                joints
-                    .iter()
-                    .zip(weights)
-                    .map(|(&j, &w)| mats[j as usize].transform_point3(x) * w)
-                    .sum()
-            })
-            .collect(),
-        Blend::DualQuaternion => {
-            let dqs: Vec<DualQuat> = mats.iter().map(DualQuat::from_mat4).collect();
-            rest.iter()
-                .enumerate()
-                .map(|(v, &x)| dqs_point(&dqs, skin, v, x))
-                .collect()
-        }
-    })
+    let mut palette = Palette::new(skeleton.len());
+    palette.set_pose(skeleton, pose)?;
+    let mut out = vec![Vec3::ZERO; rest.len()];
+    StaticSkinJob {
+        skin,
+        palette: &palette,
+        method: blend.into(),
+        first_vertex: 0,
+        rest_positions: rest,
+        rest_normals: None,
+        rest_tangents: None,
+        out_positions: &mut out,
+        out_normals: None,
+        out_tangents: None,
+    }
+    .run()?;
+    Ok(out)
 }
 
-/// Poses `rest` with dense per-vertex weights (`rest.len() × skeleton.len()`, row-major, e.g.
-/// SkinNet's output for this pose) under linear blend skinning.
+/// Poses `rest` with dense per-vertex weights (`rest.len() × skeleton.len()`, row-major, rows
+/// summing to one, e.g. the fast path's or a fitted bound's) under linear blend skinning.
 pub fn pose_dense_lbs(
     skeleton: &Skeleton,
     weights: &[f32],
@@ -123,63 +104,48 @@ pub fn pose_dense_lbs(
     let j = skeleton.len();
     if rest.len().checked_mul(j) != Some(weights.len()) {
         return Err(PosingError::Mismatch {
-            weights_vertices: weights.len() / j,
+            weights_vertices: weights.len() / j.max(1),
             weights_joints: j,
             vertices: rest.len(),
             joints: j,
         });
     }
-    let mats = skinning_matrices(skeleton, pose)?;
-    Ok(rest
-        .iter()
-        .zip(weights.chunks_exact(j))
-        .map(|(&x, w)| {
-            // Blend the matrices, then transform once: the same sum, J times fewer transforms.
-            let m = mats
-                .iter()
-                .zip(w)
-                .filter(|(_, w)| **w != 0.0)
-                .fold(Mat4::ZERO, |acc, (m, &w)| acc + *m * w);
-            m.transform_point3(x)
-        })
-        .collect())
+    let skin = StaticSkin::from_dense(weights, j)?;
+    pose_static(skeleton, &skin, rest, pose, Blend::Linear)
 }
 
-fn dqs_point(dqs: &[DualQuat], skin: &StaticSkin, v: usize, x: Vec3) -> Vec3 {
-    let (joints, weights) = skin.influences(v);
-    let mut heaviest = 0;
-    for (k, &w) in weights.iter().enumerate() {
-        if w > weights[heaviest] {
-            heaviest = k;
-        }
+/// Poses `rest` with SkinNet under LBS exactly as an engine does: bind the mesh, pose a frame
+/// with the model's own skeleton, run `SkinJob`.
+pub fn pose_skinnet(
+    model: &SkinNetModel,
+    rest: &[Vec3],
+    pose: &Pose,
+) -> Result<Vec<Vec3>, PosingError> {
+    let mesh = BoundMesh::bind(model, rest)?;
+    let mut frame = FrameState::new(model);
+    frame.set_pose(model, pose)?;
+    let mut out = vec![Vec3::ZERO; rest.len()];
+    SkinJob {
+        model,
+        mesh: &mesh,
+        frame: &frame,
+        method: Method::Lbs,
+        first_vertex: 0,
+        rest_normals: None,
+        rest_tangents: None,
+        out_positions: &mut out,
+        out_normals: None,
+        out_tangents: None,
+        out_weights: None,
     }
-    let pivot = dqs[joints[heaviest] as usize].real;
-    let (mut real, mut dual) = (
-        Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
-        Quat::from_xyzw(0.0, 0.0, 0.0, 0.0),
-    );
-    for (&j, &w) in joints.iter().zip(weights) {
-        let dq = dqs[j as usize];
-        // q and -q are the same rotation; blending across hemispheres would cancel them.
-        let w = if dq.real.dot(pivot) < 0.0 { -w } else { w };
-        real += dq.real * w;
-        dual += dq.dual * w;
-    }
-    let norm = real.length();
-    if norm.is_nan() || norm <= 1e-12 {
-        // Opposite rotations with equal weights: no defined blend; keep the heaviest joint's.
-        return dqs[joints[heaviest] as usize].transform_point(x);
-    }
-    DualQuat {
-        real: real / norm,
-        dual: dual / norm,
-    }
-    .transform_point(x)
+    .run(&mut Scratch::new(model))?;
+    Ok(out)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::{Mat4, Quat};
     use skinfield_formats::Transform;
 
     /// Two joints along +Y: a root at the origin and a child at y = 1.

@@ -389,32 +389,13 @@ pub fn init_net_varmap(
     Ok(())
 }
 
-/// `x̂ = 2(x̄ − bbox_min)/(bbox_max − bbox_min) − 1` for one point.
-#[must_use]
-pub fn normalise(config: &ModelConfig, x: Vec3) -> [f32; 3] {
-    let mut out = [0.0; 3];
-    for k in 0..3 {
-        out[k] =
-            2.0 * (x[k] - config.bbox_min[k]) / (config.bbox_max[k] - config.bbox_min[k]) - 1.0;
-    }
-    out
-}
-
-/// `[x̂, γ(x̂)]` for each point: `x̂` (3), then for `k` in `0..L`: `sin(2^k π x̂)` (3),
-/// `cos(2^k π x̂)` (3). Row-major `[V, 3 + 6L]`.
+/// `[x̂, γ(x̂)]` for each point ([`ModelConfig::position_input`], the encoding the runtime
+/// uses too), row-major `[V, 3 + 6L]`.
 #[must_use]
 pub fn encode_positions_vec(config: &ModelConfig, points: &[Vec3]) -> Vec<f32> {
-    let width = config.position_width();
-    let mut out = Vec::with_capacity(points.len() * width);
+    let mut out = Vec::with_capacity(points.len() * config.position_width());
     for &x in points {
-        let xh = normalise(config, x);
-        out.extend_from_slice(&xh);
-        // In f64 like the runtime: at k = 5 the argument is ~100 rad, where f32 would lose ~1e-5.
-        for k in 0..config.pe_frequencies {
-            let freq = f64::from(1u32 << k) * core::f64::consts::PI;
-            out.extend(xh.iter().map(|&c| (freq * f64::from(c)).sin() as f32));
-            out.extend(xh.iter().map(|&c| (freq * f64::from(c)).cos() as f32));
-        }
+        out.extend(config.position_input(x));
     }
     out
 }

@@ -165,6 +165,7 @@ pub fn train_data(
         init_weights,
         frames,
         queries,
+        up_axis: capture.up_axis,
     })
 }
 

@@ -37,7 +37,7 @@ use glam::Mat4;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::ModelConfig;
-use skinfield_formats::{Camera, Skeleton, Template};
+use skinfield_formats::{Camera, Skeleton, Template, UpAxis};
 
 use crate::geodesic::MeshGraph;
 use crate::losses::laplacian::UniformLaplacian;
@@ -86,6 +86,9 @@ pub struct TrainData {
     /// Full-resolution query points of the training vertices (`None`: query the training
     /// vertices themselves, e.g. at full resolution); see [`queries`].
     pub queries: Option<queries::QueryCells>,
+    /// The world's up axis the pose features remove the heading about; recorded in the
+    /// exported `.skf` so the runtime computes the same features.
+    pub up_axis: UpAxis,
 }
 
 /// Why training cannot start or continue.
@@ -425,6 +428,7 @@ impl Trainer {
         let pad = (hi - lo).max_element() * 0.05;
         let mc = ModelConfig {
             pe_frequencies: config.pe_frequencies,
+            up_axis: data.up_axis,
             ..ModelConfig::vinecs(j as u32, (lo - pad).to_array(), (hi + pad).to_array())
         };
         let varmap = VarMap::new();

@@ -118,6 +118,7 @@ pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
             init_weights: init,
             frames,
             queries: None,
+            up_axis: UpAxis::Y,
         },
         truth,
     )
@@ -653,6 +654,7 @@ fn finger_scene(joints: usize, frames: usize) -> TrainData {
         init_weights: init,
         frames,
         queries: None,
+        up_axis: UpAxis::Y,
     }
 }
 
@@ -850,4 +852,19 @@ fn the_guard_passes_a_model_that_learned_and_refuses_one_trained_on_wrong_silhou
         Ok(Some(refusal)),
         "--allow-worse warns"
     );
+}
+
+#[test]
+fn the_exported_model_records_the_captures_up_axis() {
+    // The pose features remove the heading about the capture's up axis; a runtime computing
+    // them about another axis would feed the network other inputs than it was trained on.
+    for axis in [UpAxis::Y, UpAxis::Z] {
+        let (data, _) = scene(1);
+        let data = TrainData {
+            up_axis: axis,
+            ..data
+        };
+        let trainer = Trainer::new(data, config(), false).unwrap();
+        assert_eq!(trainer.skf_model().unwrap().config.up_axis, axis);
+    }
 }
