@@ -1,4 +1,4 @@
-// The fast path (runtime/src/fast, docs/fast-path.md): SkinNet runs at N nodes only (the
+// The fast path (runtime/src/fast, docs/experiments/fast-path.md): SkinNet runs at N nodes only (the
 // `skinnet_weights` kernel on a node mesh); these kernels turn the nodes' weights into every
 // vertex's skinning.
 //

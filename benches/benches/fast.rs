@@ -10,7 +10,7 @@
 //! sweep at 10k vertices times the fast frame for N = 64 … 1024. Bind times are printed.
 //!
 //! After criterion's report a table of the ratios is printed from its estimates
-//! (`docs/fast-path.md` comes from this).
+//! (`docs/experiments/fast-path.md` comes from this).
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};

@@ -41,7 +41,7 @@ fn bench_gpu(c: &mut Criterion) {
 
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let joints: usize = 24;
-    let config = ModelConfig::vinecs(joints as u32, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(joints as u32, [-1.0; 3], [1.0; 3]);
     let names = (0..joints).map(|j| format!("j{j}")).collect();
     let parents = (0..joints).map(|j| j.checked_sub(1)).collect();
     let bind = (0..joints)

@@ -17,7 +17,7 @@ use skinfield_runtime::{BoundMesh, FrameState, Scratch, SkinNetModel, WeightsJob
 use skinfield_trainer::losses::lbs::{lbs, rest_homogeneous, skinning_tensor};
 use skinfield_trainer::optim::{Adam, AdamConfig};
 use skinfield_trainer::skinnet::export::to_skf_model;
-use skinfield_trainer::skinnet::{Activation, Backend, SkinNet, encode_positions};
+use skinfield_trainer::skinnet::{Activation, Backend, SkinNet, position_inputs_tensor};
 
 const JOINTS: u32 = 24;
 const FRAMES: usize = 4;
@@ -56,13 +56,13 @@ struct Inputs {
 }
 
 fn inputs() -> Inputs {
-    let config = ModelConfig::vinecs(JOINTS, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(JOINTS, [-1.0; 3], [1.0; 3]);
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let mut unit = || rng.random_range(-1.0f32..1.0);
     let points: Vec<Vec3> = (0..POINTS)
         .map(|_| Vec3::new(unit(), unit(), unit()))
         .collect();
-    let encoded = encode_positions(&config, &points, &Device::Cpu).unwrap();
+    let encoded = position_inputs_tensor(&config, &points, &Device::Cpu).unwrap();
     let q = config.pose_width();
     let pose_rows: Vec<f32> = (0..FRAMES * q).map(|_| unit()).collect();
     let poses = Tensor::from_vec(pose_rows, (FRAMES, q), &Device::Cpu).unwrap();

@@ -69,7 +69,7 @@ fn model(config: ModelConfig, seed: u64) -> SkfModel {
 
 /// J = 3, two hidden layers of 8, skip into the second, L = 2.
 fn small_config() -> ModelConfig {
-    let mut c = ModelConfig::vinecs(3, [-0.5, -1.0, -0.25], [0.5, 1.0, 0.25]);
+    let mut c = ModelConfig::paper_architecture(3, [-0.5, -1.0, -0.25], [0.5, 1.0, 0.25]);
     c.pe_frequencies = 2;
     c.hidden_count = 2;
     c.hidden = [0; MAX_HIDDEN_LAYERS];
@@ -86,7 +86,7 @@ fn small() -> (SkfModel, Vec<u8>) {
 
 fn full() -> (SkfModel, Vec<u8>) {
     let m = model(
-        ModelConfig::vinecs(24, [-1.0, -0.2, -0.5], [1.0, 1.8, 0.5]),
+        ModelConfig::paper_architecture(24, [-1.0, -0.2, -0.5], [1.0, 1.8, 0.5]),
         11,
     );
     let bytes = m.to_bytes().unwrap();

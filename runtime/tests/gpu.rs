@@ -382,7 +382,7 @@ fn check_model(
 }
 
 fn small_config() -> ModelConfig {
-    let mut c = ModelConfig::vinecs(5, [-0.5, -0.2, -0.4], [0.6, 1.1, 0.3]);
+    let mut c = ModelConfig::paper_architecture(5, [-0.5, -0.2, -0.4], [0.6, 1.1, 0.3]);
     // Odd widths exercise the kernel's unpaired last column; skip connection into layer 2.
     c.pe_frequencies = 2;
     c.hidden_count = 4;
@@ -513,7 +513,7 @@ fn f32_weight_storage_and_no_skip_model_match() {
         return;
     };
     let skinner = GpuSkinner::new(&device).unwrap();
-    let mut c = ModelConfig::vinecs(7, [-1.0; 3], [1.0; 3]);
+    let mut c = ModelConfig::paper_architecture(7, [-1.0; 3], [1.0; 3]);
     c.pe_frequencies = 3;
     c.hidden_count = 3;
     c.hidden = [33, 64, 17, 0, 0, 0, 0, 0];
@@ -542,7 +542,7 @@ fn paper_architecture_matches_cpu_reference() {
         return;
     };
     let skinner = GpuSkinner::new(&device).unwrap();
-    let c = ModelConfig::vinecs(24, [-0.9, -1.0, -0.3], [0.9, 0.8, 0.35]);
+    let c = ModelConfig::paper_architecture(24, [-0.9, -1.0, -0.3], [0.9, 0.8, 0.35]);
     check_model((&device, &queue), &skinner, c, &[65, 2000], None, 3);
 }
 

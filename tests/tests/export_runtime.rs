@@ -39,7 +39,7 @@ fn skeleton() -> Skeleton {
 #[test]
 fn runtime_cpu_weights_equal_candle_forward_on_the_exported_file() {
     let skel = skeleton();
-    let config = ModelConfig::vinecs(JOINTS as u32, [-0.6, 0.0, -0.3], [0.6, 1.9, 0.3]);
+    let config = ModelConfig::paper_architecture(JOINTS as u32, [-0.6, 0.0, -0.3], [0.6, 1.9, 0.3]);
     // Output scale 40: far from uniform weights, so a wrong layer would show.
     let (net, _vars) = SkinNet::seeded(config, 42, 40.0).unwrap();
     let bytes = to_skf_model(&net, &skel).unwrap().to_bytes().unwrap();

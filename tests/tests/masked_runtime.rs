@@ -13,7 +13,7 @@ use skinfield_runtime::SkinNetModel;
 use skinfield_runtime::candidates::nearest_anchors;
 use skinfield_trainer::candidates::additive_mask;
 use skinfield_trainer::skinnet::export::to_skf_model;
-use skinfield_trainer::skinnet::{SkinNet, encode_positions};
+use skinfield_trainer::skinnet::{SkinNet, position_inputs_tensor};
 
 fn chain(j: usize) -> Skeleton {
     let t = Transform {
@@ -35,7 +35,7 @@ fn chain(j: usize) -> Skeleton {
 #[test]
 fn runtime_masked_weights_equal_the_trainers() {
     let j = 6;
-    let config = ModelConfig::vinecs(j as u32, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(j as u32, [-1.0; 3], [1.0; 3]);
     let (net, _vars) = SkinNet::seeded(config, 4, 3.0).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let mut point = || {
@@ -84,7 +84,7 @@ fn runtime_masked_weights_equal_the_trainers() {
     pose_features(&skeleton, &pose, UpAxis::Y, &mut features).unwrap();
     let want = net
         .forward_masked(
-            &encode_positions(&config, &points, &Device::Cpu).unwrap(),
+            &position_inputs_tensor(&config, &points, &Device::Cpu).unwrap(),
             &Tensor::from_vec(features, (1, 3 * j), &Device::Cpu).unwrap(),
             Some(&mask),
         )

@@ -13,3 +13,4 @@ pub mod raster;
 pub mod skinnet;
 pub mod synth;
 pub mod train;
+pub mod triangle_bvh;

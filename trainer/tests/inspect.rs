@@ -145,7 +145,7 @@ fn skf_model() {
         glam::Mat4::IDENTITY,
     )
     .unwrap();
-    let config = ModelConfig::vinecs(3, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(3, [-1.0; 3], [1.0; 3]);
     let mut model = SkfModel {
         config,
         skeleton,

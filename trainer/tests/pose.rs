@@ -135,7 +135,8 @@ fn model_weights_drive_the_matching_skin() {
     let skin = &doc.skins[0];
     let bb = skinfield_formats::Aabb::from_points(&skin.template.positions).unwrap();
     let j = skin.skeleton.len();
-    let mut config = ModelConfig::vinecs(j as u32, bb.min.to_array(), bb.max.to_array());
+    let mut config =
+        ModelConfig::paper_architecture(j as u32, bb.min.to_array(), bb.max.to_array());
     config.hidden_count = 2;
     config.hidden = [16, 16, 0, 0, 0, 0, 0, 0];
     config.skip_layer = 1;

@@ -79,7 +79,7 @@ impl ModelConfig {
     /// The paper's architecture (supplementary D; see `docs/design.md`, *Network*) for
     /// `joint_count` joints.
     #[must_use]
-    pub fn vinecs(joint_count: u32, bbox_min: [f32; 3], bbox_max: [f32; 3]) -> Self {
+    pub fn paper_architecture(joint_count: u32, bbox_min: [f32; 3], bbox_max: [f32; 3]) -> Self {
         let mut hidden = [0; MAX_HIDDEN_LAYERS];
         hidden[..5].copy_from_slice(&[256, 256, 128, 256, 256]);
         Self {
@@ -294,7 +294,7 @@ mod tests {
 
     #[test]
     fn vinecs_architecture_matches_design_flop_count() {
-        let c = ModelConfig::vinecs(24, [-1.0; 3], [1.0; 3]);
+        let c = ModelConfig::paper_architecture(24, [-1.0; 3], [1.0; 3]);
         c.validate().unwrap();
         let shapes: alloc::vec::Vec<_> = c.layer_shapes(Net::Skin).collect();
         assert_eq!(
@@ -318,7 +318,7 @@ mod tests {
 
     #[test]
     fn rejects_each_bad_field() {
-        let good = ModelConfig::vinecs(24, [-1.0; 3], [1.0; 3]);
+        let good = ModelConfig::paper_architecture(24, [-1.0; 3], [1.0; 3]);
         let cases: [Mutation; 9] = [
             (|c| c.pe_frequencies = 99, "pe_frequencies"),
             (|c| c.softplus_beta = f32::NAN, "softplus_beta"),

@@ -297,7 +297,7 @@ mod tests {
             Mat4::IDENTITY,
         )
         .unwrap();
-        let mut config = ModelConfig::vinecs(1, [-1.0; 3], [1.0; 3]);
+        let mut config = ModelConfig::paper_architecture(1, [-1.0; 3], [1.0; 3]);
         config.hidden_count = 1;
         config.hidden = [4, 0, 0, 0, 0, 0, 0, 0];
         config.skip_layer = 0;

@@ -168,7 +168,7 @@ impl FastMesh {
     /// Binds a triangle mesh (canonical positions, any count ≥ 1; `triangles` index them, may be
     /// empty for a point cloud, which then uses straight-line distances) for the fast path.
     /// Costs one exact SkinNet evaluation of every vertex (the bind-pose base weights) plus
-    /// graph searches; see `docs/fast-path.md` for measured bind times.
+    /// graph searches; see `docs/experiments/fast-path.md` for measured bind times.
     pub fn bind<W: AsRef<[f32]>>(
         model: &SkinNet<W>,
         positions: &[Vec3],

@@ -1,5 +1,5 @@
 //! The fast path: pose-dependent skinning whose per-frame MLP cost does not grow with the mesh
-//! (`docs/fast-path.md` has the design comparison and the measurements).
+//! (`docs/experiments/fast-path.md` has the design comparison and the measurements).
 //!
 //! SkinNet is a smooth field over canonical space. At bind time ([`FastMesh::bind`]):
 //!
@@ -93,7 +93,7 @@ pub struct FastOptions {
 }
 
 impl FastOptions {
-    /// The defaults (`docs/fast-path.md` has the measurements behind them).
+    /// The defaults (`docs/experiments/fast-path.md` has the measurements behind them).
     pub const DEFAULT: Self = Self {
         nodes: 256,
         neighbours: 4,

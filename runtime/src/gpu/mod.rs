@@ -30,7 +30,7 @@ pub use layout::{
     GpuFastParams, GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
     WORKGROUP_THREADS, WeightFormat, shader_source,
 };
-pub use skinner::{GpuMesh, GpuModel, GpuSkinner, position_encoding};
+pub use skinner::{GpuMesh, GpuModel, GpuSkinner};
 
 /// Why a GPU operation failed.
 #[derive(Debug, thiserror::Error)]

@@ -104,7 +104,7 @@ fn split_dispatch(groups: u32, max: u32) -> (u32, u32) {
 /// `[x̂, γ(x̂)]` of every position ([`ModelConfig::position_input`], the CPU path's and the
 /// trainer's encoding) appended to `out`. Done on the CPU because WGSL's `sin`/`cos` are only
 /// accurate to about 2⁻¹¹ and only near zero.
-pub fn position_encoding(config: &ModelConfig, positions: &[Vec3], out: &mut Vec<f32>) {
+pub(crate) fn position_inputs(config: &ModelConfig, positions: &[Vec3], out: &mut Vec<f32>) {
     out.reserve(positions.len() * config.position_width());
     for &p in positions {
         out.extend(config.position_input(p));
@@ -455,7 +455,7 @@ impl GpuSkinner {
         self.check_groups("SkinNet workgroups", v.div_ceil(SKINNET_TILE.into()))?;
 
         let mut encoding = Vec::new();
-        position_encoding(&model.config, positions, &mut encoding);
+        position_inputs(&model.config, positions, &mut encoding);
         let rest: Vec<SkinnedVertex> = positions
             .iter()
             .zip(normals)
@@ -793,11 +793,11 @@ mod tests {
     }
 
     #[test]
-    fn position_encoding_matches_the_documented_layout() {
-        let mut c = ModelConfig::vinecs(2, [-1.0, 0.0, 2.0], [1.0, 2.0, 6.0]);
+    fn position_inputs_match_the_documented_layout() {
+        let mut c = ModelConfig::paper_architecture(2, [-1.0, 0.0, 2.0], [1.0, 2.0, 6.0]);
         c.pe_frequencies = 2;
         let mut out = Vec::new();
-        position_encoding(&c, &[Vec3::new(0.5, 0.5, 3.0)], &mut out);
+        position_inputs(&c, &[Vec3::new(0.5, 0.5, 3.0)], &mut out);
         assert_eq!(out.len(), c.position_width());
         let xh = [0.5f64, -0.5, -0.5];
         let pi = core::f64::consts::PI;

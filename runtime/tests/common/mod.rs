@@ -69,14 +69,14 @@ pub fn random_model(config: ModelConfig, seed: u64) -> SkfModel {
 
 /// The paper's architecture for `j` joints, random weights, as `.skf` bytes.
 pub fn vinecs_bytes(j: u32, seed: u64) -> Vec<u8> {
-    random_model(ModelConfig::vinecs(j, BBOX_MIN, BBOX_MAX), seed)
+    random_model(ModelConfig::paper_architecture(j, BBOX_MIN, BBOX_MAX), seed)
         .to_bytes()
         .unwrap()
 }
 
 /// A small odd-shaped config (widths not multiples of the panel height, a skip at layer 2).
 pub fn odd_config() -> ModelConfig {
-    let mut c = ModelConfig::vinecs(5, BBOX_MIN, BBOX_MAX);
+    let mut c = ModelConfig::paper_architecture(5, BBOX_MIN, BBOX_MAX);
     c.pe_frequencies = 2;
     c.hidden_count = 3;
     c.hidden = [13, 21, 9, 0, 0, 0, 0, 0];
@@ -86,7 +86,7 @@ pub fn odd_config() -> ModelConfig {
 
 /// Another: no skip connection (skip at layer 0 means only layer 0 sees the input).
 pub fn no_skip_config() -> ModelConfig {
-    let mut c = ModelConfig::vinecs(3, BBOX_MIN, BBOX_MAX);
+    let mut c = ModelConfig::paper_architecture(3, BBOX_MIN, BBOX_MAX);
     c.pe_frequencies = 0;
     c.softplus_beta = 1.0;
     c.hidden_count = 2;

@@ -25,7 +25,7 @@ use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 
 use crate::raster::rasterize;
 use crate::skinnet::{
-    SkfNetError, WnLinear, encode_positions, init_net_varmap, softplus, varmap_from_skf,
+    SkfNetError, WnLinear, init_net_varmap, position_inputs_tensor, softplus, varmap_from_skf,
 };
 
 /// A weight-normalised MLP of the file's architecture for [`Net::Albedo`] or [`Net::Shadow`].
@@ -242,7 +242,7 @@ impl Appearance {
         eye: Vec3,
     ) -> Result<Colours> {
         let dev = Device::Cpu;
-        let enc = encode_positions(&self.config, points, &dev)?;
+        let enc = position_inputs_tensor(&self.config, points, &dev)?;
         let albedo = self.albedo(&enc)?;
         let dirs: Vec<Vec3> = posed
             .iter()

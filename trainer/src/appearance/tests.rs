@@ -4,10 +4,10 @@ use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 
 use super::*;
 use crate::skinnet::export::to_skf_model;
-use crate::skinnet::{SkinNet, encode_positions, encode_positions_vec, softplus::softplus_scalar};
+use crate::skinnet::{SkinNet, position_inputs, position_inputs_tensor, softplus::softplus_scalar};
 
 fn small_config() -> ModelConfig {
-    let mut c = ModelConfig::vinecs(3, [-1.0; 3], [1.0; 3]);
+    let mut c = ModelConfig::paper_architecture(3, [-1.0; 3], [1.0; 3]);
     c.pe_frequencies = 2;
     c.hidden_count = 3;
     c.hidden = [0; skinfield_formats::skf::MAX_HIDDEN_LAYERS];
@@ -62,9 +62,9 @@ fn forward_matches_a_scalar_reference_and_shading_is_positive() {
     let cfg = small_config();
     let app = Appearance::seeded(cfg, 5, 1.0).unwrap();
     let pts = points();
-    let enc = encode_positions(&cfg, &pts, &Device::Cpu).unwrap();
+    let enc = position_inputs_tensor(&cfg, &pts, &Device::Cpu).unwrap();
     let albedo = app.albedo(&enc).unwrap().to_vec2::<f32>().unwrap();
-    let flat = encode_positions_vec(&cfg, &pts);
+    let flat = position_inputs(&cfg, &pts);
     let w = cfg.position_width();
     for (k, row) in albedo.iter().enumerate() {
         let x: Vec<f64> = flat[k * w..(k + 1) * w]
@@ -135,7 +135,7 @@ fn skf_round_trip_keeps_the_outputs_and_missing_nets_are_named() {
     let view = SkfView::parse(&bytes).unwrap();
     let back = Appearance::from_skf(&view, &path).unwrap();
     let pts = points();
-    let enc = encode_positions(&cfg, &pts, &Device::Cpu).unwrap();
+    let enc = position_inputs_tensor(&cfg, &pts, &Device::Cpu).unwrap();
     let pose = vec![0.2; cfg.pose_width()];
     let normals = vec![Vec3::Y; pts.len()];
     let input = shadow_input(&enc, &pose, &normals, &normals).unwrap();

@@ -4,7 +4,7 @@
 //! capture's template (e.g. one written by `trainer resample`; SkinNet rows only).
 //! `--fast [N]` adds, after every `skf:FILE` row, the runtime's fast path at N nodes (and, per
 //! `--top-k K`, its top-k output), scored the same way, and prints their added error against
-//! the exact path (docs/fast-path.md).
+//! the exact path (docs/experiments/fast-path.md).
 
 use std::path::PathBuf;
 

@@ -58,7 +58,6 @@
 //! `trainer eval --fast [N]` adds the runtime's fast path of every `skf:FILE` row ([`fast`]).
 
 pub mod bounds;
-pub mod bvh;
 pub mod diagnostics;
 pub mod distance;
 pub mod fast;
@@ -612,7 +611,7 @@ pub fn per_vertex_m2s(
     posed: &[Vec3],
 ) -> Result<Vec<f32>, EvalError> {
     let truth = capture.evaluation_gt_mesh(frame)?;
-    let bvh = bvh::TriangleBvh::new(&truth, &capture.template.triangles);
+    let bvh = crate::triangle_bvh::TriangleBvh::new(&truth, &capture.template.triangles);
     Ok(surface::distances_to(posed, &bvh))
 }
 pub mod render;

@@ -10,7 +10,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::bvh::TriangleBvh;
+use crate::triangle_bvh::TriangleBvh;
 
 /// Points sampled per surface per frame by [`surface_metrics`] callers by default.
 ///

@@ -20,7 +20,7 @@ pub(super) fn tiny_capture(dir: &Path) -> Capture {
 /// Written to `path`; also returned.
 pub(super) fn root_only_skf(capture: &Capture, path: &Path) -> SkfModel {
     let b = capture.template.bounds().unwrap();
-    let mut config = ModelConfig::vinecs(
+    let mut config = ModelConfig::paper_architecture(
         capture.skeleton.len() as u32,
         b.min.to_array(),
         b.max.to_array(),

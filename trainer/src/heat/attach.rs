@@ -18,7 +18,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::bones::BoneSegment;
-use super::bvh::Bvh;
+use crate::triangle_bvh::TriangleBvh;
 
 /// The attachment of one vertex.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -69,7 +69,7 @@ pub(crate) fn attach(
     normals: &[DVec3],
     active: &[bool],
     segments: &[BoneSegment],
-    bvh: &Bvh,
+    bvh: &TriangleBvh,
     params: AttachParams,
 ) -> Vec<Attachment> {
     (0..positions.len())
@@ -88,7 +88,7 @@ fn attach_one(
     p: DVec3,
     normal: DVec3,
     segments: &[BoneSegment],
-    bvh: &Bvh,
+    bvh: &TriangleBvh,
     params: AttachParams,
     order: &mut Vec<(f64, usize)>,
 ) -> Attachment {
@@ -167,7 +167,7 @@ mod tests {
             DVec3::new(0.5, 5.0, 5.0),
             DVec3::new(0.5, -5.0, 5.0),
         ];
-        let bvh = Bvh::new(&wall, &[[0, 1, 2], [0, 2, 3]]);
+        let bvh = TriangleBvh::new_f64(&wall, &[[0, 1, 2], [0, 2, 3]]);
         let segs = [
             seg(0, [1.0, -1.0, 0.0], [1.0, 1.0, 0.0]),
             seg(1, [-1.5, -1.0, 0.0], [-1.5, 1.0, 0.0]),
@@ -201,7 +201,7 @@ mod tests {
             &[DVec3::NEG_X],
             &[true],
             &segs,
-            &Bvh::new(&[], &[]),
+            &TriangleBvh::new_f64(&[], &[]),
             params,
         );
         assert_eq!(no_wall[0].joints, vec![(0, 1.0)]);
@@ -218,7 +218,7 @@ mod tests {
         );
         let p = [DVec3::ZERO];
         // Two bones at the same distance, both visible (no wall): they share.
-        let empty = Bvh::new(&[], &[]);
+        let empty = TriangleBvh::new_f64(&[], &[]);
         let segs = [
             seg(3, [0.0, -1.0, -1.0], [0.0, 1.0, -1.0]),
             seg(5, [0.0, -1.0, 1.0], [0.0, 1.0, 1.0]),

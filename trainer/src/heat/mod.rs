@@ -33,7 +33,6 @@
 
 mod attach;
 mod bones;
-mod bvh;
 mod laplacian;
 mod solve;
 mod weld;
@@ -225,7 +224,7 @@ pub fn bone_heat(
         .filter(|(_, u)| **u)
         .map(|(t, _)| *t)
         .collect();
-    let bvh = bvh::Bvh::new(&welded.positions, &used_triangles);
+    let bvh = crate::triangle_bvh::TriangleBvh::new_f64(&welded.positions, &used_triangles);
     let normals = attach::cone_normals(&welded.positions, &welded.triangles, &stiffness.used);
     stats.setup_s = start.elapsed().as_secs_f64();
 

@@ -177,7 +177,7 @@ impl SkinNet {
         Tensor::cat(&parts, 0)
     }
 
-    /// Skinning weights `[F, V, J]` for encoded positions `[V, 3 + 6L]` ([`encode_positions`])
+    /// Skinning weights `[F, V, J]` for encoded positions `[V, 3 + 6L]` ([`position_inputs_tensor`])
     /// and pose features `[F, 3J]`; rows sum to one. With [`Backend::Fused`] and f32 inputs the
     /// fused op computes it (other dtypes fall back to the candle graph).
     pub fn forward(&self, positions: &Tensor, poses: &Tensor) -> Result<Tensor> {
@@ -265,7 +265,7 @@ impl SkinNet {
         if poses.iter().any(|p| p.len() != q) {
             candle_core::bail!("pose features must have {q} entries");
         }
-        let enc = encode_positions(&self.config, points, &dev)?;
+        let enc = position_inputs_tensor(&self.config, points, &dev)?;
         let flat: Vec<f32> = poses.iter().flatten().copied().collect();
         let dt = self.layers.first().map_or(DType::F32, |l| l.v.dtype());
         let w = self.forward(
@@ -392,7 +392,7 @@ pub fn init_net_varmap(
 /// `[x̂, γ(x̂)]` for each point ([`ModelConfig::position_input`], the encoding the runtime
 /// uses too), row-major `[V, 3 + 6L]`.
 #[must_use]
-pub fn encode_positions_vec(config: &ModelConfig, points: &[Vec3]) -> Vec<f32> {
+pub fn position_inputs(config: &ModelConfig, points: &[Vec3]) -> Vec<f32> {
     let mut out = Vec::with_capacity(points.len() * config.position_width());
     for &x in points {
         out.extend(config.position_input(x));
@@ -400,10 +400,14 @@ pub fn encode_positions_vec(config: &ModelConfig, points: &[Vec3]) -> Vec<f32> {
     out
 }
 
-/// [`encode_positions_vec`] as an f32 tensor `[V, 3 + 6L]` on `device`.
-pub fn encode_positions(config: &ModelConfig, points: &[Vec3], device: &Device) -> Result<Tensor> {
+/// [`position_inputs`] as an f32 tensor `[V, 3 + 6L]` on `device`.
+pub fn position_inputs_tensor(
+    config: &ModelConfig,
+    points: &[Vec3],
+    device: &Device,
+) -> Result<Tensor> {
     Tensor::from_vec(
-        encode_positions_vec(config, points),
+        position_inputs(config, points),
         (points.len(), config.position_width()),
         device,
     )

@@ -75,13 +75,13 @@ fn random_poses(f: usize, j: usize, seed: u64) -> Vec<f32> {
 }
 
 fn config(j: u32) -> ModelConfig {
-    ModelConfig::vinecs(j, [-0.5, 0.0, -0.2], [0.5, 1.8, 0.2])
+    ModelConfig::paper_architecture(j, [-0.5, 0.0, -0.2], [0.5, 1.8, 0.2])
 }
 
 #[test]
 fn encoding_order_is_x_then_sin_cos_per_frequency() {
     let c = config(2);
-    let e = encode_positions_vec(&c, &[Vec3::new(0.25, 0.9, 0.0)]);
+    let e = position_inputs(&c, &[Vec3::new(0.25, 0.9, 0.0)]);
     assert_eq!(e.len(), 39);
     // x̂ = (0.5, 0, 0): 0.25 → 2·0.75/1 − 1; 0.9 → 2·0.5 − 1; 0 → 2·0.5 − 1.
     assert!((e[0] - 0.5).abs() < 1e-6 && e[1].abs() < 1e-6 && e[2].abs() < 1e-6);
@@ -103,10 +103,10 @@ fn forward_equals_naive_loops_for_every_frame_and_vertex() {
     let (net, _vm) = SkinNet::seeded(c, 7, 1.0).unwrap();
     let pts = random_points(6, 1);
     let poses = random_poses(3, 5, 2);
-    let enc = encode_positions_vec(&c, &pts);
+    let enc = position_inputs(&c, &pts);
     let w = net
         .forward(
-            &encode_positions(&c, &pts, &Device::Cpu).unwrap(),
+            &position_inputs_tensor(&c, &pts, &Device::Cpu).unwrap(),
             &Tensor::from_vec(poses.clone(), (3, 15), &Device::Cpu).unwrap(),
         )
         .unwrap();
@@ -144,7 +144,7 @@ fn forward_equals_naive_loops_for_every_frame_and_vertex() {
 fn composite_activation_gives_the_same_output() {
     let c = config(3);
     let (net, _vm) = SkinNet::seeded(c, 3, 1.0).unwrap();
-    let enc = encode_positions(&c, &random_points(50, 4), &Device::Cpu).unwrap();
+    let enc = position_inputs_tensor(&c, &random_points(50, 4), &Device::Cpu).unwrap();
     let poses = Tensor::from_vec(random_poses(2, 3, 5), (2, 9), &Device::Cpu).unwrap();
     let a = net.forward(&enc, &poses).unwrap();
     let b = net
@@ -185,7 +185,7 @@ fn f64_net(c: ModelConfig, seed: u64) -> (SkinNet, VarMap) {
 fn parameter_gradients_match_finite_differences() {
     let c = config(4);
     let (net, vm) = f64_net(c, 11);
-    let enc = encode_positions(&c, &random_points(8, 6), &Device::Cpu)
+    let enc = position_inputs_tensor(&c, &random_points(8, 6), &Device::Cpu)
         .unwrap()
         .to_dtype(DType::F64)
         .unwrap();
@@ -297,13 +297,13 @@ fn exported_skf_evaluates_like_candle() {
     let poses = random_poses(3, 6, 10);
     let w = net
         .forward(
-            &encode_positions(&c, &pts, &Device::Cpu).unwrap(),
+            &position_inputs_tensor(&c, &pts, &Device::Cpu).unwrap(),
             &Tensor::from_vec(poses.clone(), (3, 18), &Device::Cpu).unwrap(),
         )
         .unwrap()
         .to_vec3::<f32>()
         .unwrap();
-    let enc = encode_positions_vec(&c, &pts);
+    let enc = position_inputs(&c, &pts);
     let pw = c.position_width();
     let mut worst = 0.0f64;
     let mut spread = 0.0f64;

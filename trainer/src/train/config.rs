@@ -20,7 +20,7 @@ pub struct LossWeights {
     /// candidate joints ([`TrainConfig::candidate_joints`]) make its purpose, locality, a hard
     /// constraint, and as a soft term it holds the weights near the initial ones. On the
     /// built-in capture (1,000 image iterations, 8 candidates) switching both regularisers off
-    /// took SkinNet from 0.896 to 0.696 cm Chamfer (bone heat 1.003); see docs/fidelity.md.
+    /// took SkinNet from 0.896 to 0.696 cm Chamfer (bone heat 1.003); see docs/experiments/fidelity.md.
     pub skinning: f64,
     /// Part-wise regulariser (mean per rigid skin vertex; off by default, see `skinning`).
     pub partwise: f64,

@@ -10,15 +10,57 @@
 //!
 //! Only training frames are read; the capture's evaluation-only ground truth is never touched.
 
+use std::sync::Arc;
+
 use glam::Mat4;
 use rayon::prelude::*;
 use skinfield_formats::capture::{Capture, CaptureError};
-use skinfield_formats::{StaticSkin, Template, pose_features};
+use skinfield_formats::{Camera, Skeleton, StaticSkin, Template, UpAxis, pose_features};
 use skinfield_runtime::resample::{Target, simplify};
 
 use super::queries::QueryCells;
-use super::{Frame, TrainData, View};
 use crate::losses::silhouette::SilhouetteTarget;
+
+/// One camera view of a training frame.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// The calibrated camera.
+    pub camera: Camera,
+    /// The outline of the foreground mask and points along it.
+    pub target: SilhouetteTarget,
+    /// The mask's coverage (row-major, `[0, 1]`; validation's IoU).
+    pub coverage: Arc<[f32]>,
+}
+
+/// One training frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Skinning matrices (`world · inverse_bind`), one per joint.
+    pub skinning: Vec<Mat4>,
+    /// Pose features θ̃ (`3J`).
+    pub pose_features: Vec<f32>,
+    /// The views that see it.
+    pub views: Vec<View>,
+}
+
+/// Everything stage 1 trains on.
+#[derive(Clone, Debug)]
+pub struct TrainData {
+    /// The skeleton (its joint order is SkinNet's output order).
+    pub skeleton: Skeleton,
+    /// The (possibly reduced-resolution) template.
+    pub template: Template,
+    /// Initial weights, dense `[V, J]` row-major (bone heat or the asset's).
+    pub init_weights: Vec<f32>,
+    /// Training frames.
+    pub frames: Vec<Frame>,
+    /// Full-resolution query points of the training vertices (`None`: query the training
+    /// vertices themselves, e.g. at full resolution); see [`queries`].
+    pub queries: Option<QueryCells>,
+    /// The world's up axis the pose features remove the heading about; recorded in the
+    /// exported `.skf` so the runtime computes the same features.
+    pub up_axis: UpAxis,
+}
 
 /// How a capture is turned into training data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

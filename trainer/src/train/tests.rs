@@ -1,7 +1,9 @@
 use super::*;
 use glam::{Quat, Vec3};
 use skinfield_formats::math::Transform;
-use skinfield_formats::{Pose, UpAxis, pose_features};
+use skinfield_formats::{Camera, Pose, Skeleton, Template, UpAxis, pose_features};
+
+use crate::losses::silhouette::SilhouetteTarget;
 
 /// A tube along +Y (radius 0.1, height 1), 12 around × 11 rings, and a two-bone chain with the
 /// elbow at y = 0.5. Ground truth: a smooth blend over y ∈ [0.35, 0.65]; initial weights: a hard

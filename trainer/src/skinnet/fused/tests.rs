@@ -11,7 +11,7 @@ use skinfield_formats::skf::{ModelConfig, SkfView};
 use super::ParamLayout;
 use crate::optim::{Adam, AdamConfig};
 use crate::skinnet::export::to_skf_model;
-use crate::skinnet::{Activation, Backend, PREFIX, SkinNet, encode_positions};
+use crate::skinnet::{Activation, Backend, PREFIX, SkinNet, position_inputs_tensor};
 
 fn random_points(n: usize, seed: u64) -> Vec<Vec3> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -83,7 +83,7 @@ fn check_masked(
     mask: Option<&Tensor>,
 ) {
     let dev = Device::Cpu;
-    let enc = encode_positions(&config, &random_points(points, seed), &dev).unwrap();
+    let enc = position_inputs_tensor(&config, &random_points(points, seed), &dev).unwrap();
     let q = config.pose_width();
     let poses =
         Tensor::from_vec(random_values(frames * q, 1.5, seed + 1), (frames, q), &dev).unwrap();
@@ -168,7 +168,7 @@ fn seeded_vars(config: ModelConfig, seed: u64) -> VarMap {
 fn gradients_equal_candle_on_random_nets() {
     // The paper's architecture, a narrow net with the skip into the second layer, and a net
     // without a skip layer.
-    let paper = ModelConfig::vinecs(5, [-1.0; 3], [1.0; 3]);
+    let paper = ModelConfig::paper_architecture(5, [-1.0; 3], [1.0; 3]);
     let mut narrow = paper;
     narrow.hidden_count = 3;
     narrow.hidden = [0; skinfield_formats::skf::MAX_HIDDEN_LAYERS];
@@ -186,7 +186,7 @@ fn gradients_equal_candle_on_random_nets() {
 #[test]
 fn masked_gradients_equal_candle() {
     // Each point keeps 1–4 of 7 joints (a seeded pattern), as candidate masks do.
-    let config = ModelConfig::vinecs(7, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(7, [-1.0; 3], [1.0; 3]);
     let points = 29;
     let mut rng = ChaCha8Rng::seed_from_u64(17);
     let lists: Vec<Vec<u16>> = (0..points)
@@ -215,11 +215,11 @@ fn masked_gradients_equal_candle() {
 fn gradients_equal_candle_on_a_trained_net_read_from_a_skf() {
     // Train a small paper-shaped net towards peaked, position-dependent weights (so its
     // softmax saturates as a trained SkinNet's does), export it, read it back and compare.
-    let config = ModelConfig::vinecs(4, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(4, [-1.0; 3], [1.0; 3]);
     let (net, varmap) = SkinNet::seeded(config, 3, 0.1).unwrap();
     let dev = Device::Cpu;
     let pts = random_points(64, 9);
-    let enc = encode_positions(&config, &pts, &dev).unwrap();
+    let enc = position_inputs_tensor(&config, &pts, &dev).unwrap();
     let poses = Tensor::zeros((1, config.pose_width()), DType::F32, &dev).unwrap();
     let target: Vec<f32> = pts
         .iter()
@@ -251,10 +251,10 @@ fn gradients_equal_candle_on_a_trained_net_read_from_a_skf() {
 
 #[test]
 fn a_step_is_deterministic_and_a_second_backward_recomputes() {
-    let config = ModelConfig::vinecs(6, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(6, [-1.0; 3], [1.0; 3]);
     let (net, varmap) = SkinNet::seeded(config, 5, 1.0).unwrap();
     let dev = Device::Cpu;
-    let enc = encode_positions(&config, &random_points(40, 2), &dev).unwrap();
+    let enc = position_inputs_tensor(&config, &random_points(40, 2), &dev).unwrap();
     let q = config.pose_width();
     let poses = Tensor::from_vec(random_values(2 * q, 1.0, 3), (2, q), &dev).unwrap();
     let target = Tensor::from_vec(random_values(2 * 40 * 6, 1.0, 4), (2, 40, 6), &dev).unwrap();
@@ -287,7 +287,7 @@ fn a_step_is_deterministic_and_a_second_backward_recomputes() {
 
 #[test]
 fn the_layout_matches_the_packed_parameters() {
-    let config = ModelConfig::vinecs(7, [-1.0; 3], [1.0; 3]);
+    let config = ModelConfig::paper_architecture(7, [-1.0; 3], [1.0; 3]);
     let (net, _vars) = SkinNet::seeded(config, 1, 1.0).unwrap();
     let layout = ParamLayout::new(&config);
     let packed = net.packed_parameters().unwrap().to_vec1::<f32>().unwrap();

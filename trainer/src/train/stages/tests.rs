@@ -1,7 +1,7 @@
 use glam::Vec3;
 
 use super::*;
-use crate::skinnet::encode_positions;
+use crate::skinnet::position_inputs_tensor;
 use crate::train::tests::{config, scene, scene_with_queries};
 use crate::train::{TrainConfig, TrainData};
 
@@ -85,7 +85,7 @@ fn appearance_reads_the_training_vertices_with_query_cells() {
     let (data, _) = scene_with_queries(1);
     let t = Trainer::new(data.clone(), config(), false).unwrap();
     let config = t.net().unwrap().config();
-    let expected = encode_positions(config, &data.template.positions, &Device::Cpu).unwrap();
+    let expected = position_inputs_tensor(config, &data.template.positions, &Device::Cpu).unwrap();
     assert_eq!(
         t.encoded().unwrap().to_vec2::<f32>().unwrap(),
         expected.to_vec2::<f32>().unwrap()
@@ -109,7 +109,7 @@ fn albedo_stage_learns_the_texture_and_runs_are_deterministic() {
     assert!(last < 0.5 * first, "L_rend {first} → {last}");
     // The learned albedo approaches the texture on the template (independent of the images).
     let t = &a.data.template;
-    let enc = encode_positions(app.config(), &t.positions, &Device::Cpu).unwrap();
+    let enc = position_inputs_tensor(app.config(), &t.positions, &Device::Cpu).unwrap();
     let learned = app.albedo(&enc).unwrap().to_vec2::<f32>().unwrap();
     let err = |f: &dyn Fn(Vec3) -> Vec3| {
         t.positions

@@ -25,9 +25,12 @@ use std::path::{Path, PathBuf};
 use glam::{Mat3, Quat, Vec3};
 
 use crate::math::Transform;
-use crate::mesh::{MAX_VERTICES, MeshError, Template};
+use crate::mesh::{MeshError, Template};
 use crate::skeleton::{MAX_JOINTS, Skeleton, SkeletonError};
 use crate::skin::{SkinError, StaticSkin};
+
+mod obj;
+use obj::parse_obj;
 
 /// Largest file this reader opens (bytes); `base.obj` is about 2 MiB.
 pub const MAX_FILE_BYTES: u64 = 256 << 20;
@@ -238,108 +241,6 @@ fn read_text(path: &Path) -> Result<String, MakeHumanError> {
         });
     }
     std::fs::read_to_string(path).map_err(io)
-}
-
-struct ParsedObj {
-    positions: Vec<Vec3>,
-    polygons: Vec<Vec<u32>>,
-    polygon_group: Vec<usize>,
-    group_names: Vec<String>,
-}
-
-fn parse_obj(path: &Path, text: &str) -> Result<ParsedObj, MakeHumanError> {
-    let err = |line: usize, what: String| MakeHumanError::Obj {
-        path: path.to_owned(),
-        line: line + 1,
-        what,
-    };
-    let mut positions = Vec::new();
-    let mut polygons: Vec<Vec<u32>> = Vec::new();
-    let mut polygon_group = Vec::new();
-    let mut group_names: Vec<String> = Vec::new();
-    let mut current_group: Option<usize> = None;
-    let mut triangle_count = 0usize;
-    for (ln, line) in text.lines().enumerate() {
-        let mut it = line.split_whitespace();
-        match it.next() {
-            Some("v") => {
-                if positions.len() >= MAX_VERTICES {
-                    return Err(err(ln, format!("more than {MAX_VERTICES} vertices")));
-                }
-                let mut p = [0.0f32; 3];
-                for c in &mut p {
-                    let s = it
-                        .next()
-                        .ok_or_else(|| err(ln, "vertex with fewer than 3 coordinates".into()))?;
-                    *c = s
-                        .parse()
-                        .map_err(|_| err(ln, format!("bad coordinate `{s}`")))?;
-                    if !c.is_finite() {
-                        return Err(err(ln, format!("non-finite coordinate `{s}`")));
-                    }
-                }
-                positions.push(Vec3::from_array(p));
-            }
-            Some("g") => {
-                let name = it.collect::<Vec<_>>().join(" ");
-                let g = match group_names.iter().position(|n| *n == name) {
-                    Some(g) => g,
-                    None => {
-                        group_names.push(name);
-                        group_names.len() - 1
-                    }
-                };
-                current_group = Some(g);
-            }
-            Some("f") => {
-                let mut poly = Vec::new();
-                for corner in it {
-                    if poly.len() >= MAX_POLYGON_CORNERS {
-                        return Err(err(
-                            ln,
-                            format!("polygon with more than {MAX_POLYGON_CORNERS} corners"),
-                        ));
-                    }
-                    let first = corner.split('/').next().unwrap_or("");
-                    let i: i64 = first
-                        .parse()
-                        .map_err(|_| err(ln, format!("bad face index `{corner}`")))?;
-                    // OBJ indices are 1-based; negative ones count back from the latest vertex.
-                    let n = positions.len() as i64;
-                    let v = if i > 0 { i - 1 } else { n + i };
-                    if i == 0 || v < 0 || v >= n {
-                        return Err(err(ln, format!("face index {i} out of range (1..={n})")));
-                    }
-                    poly.push(v as u32);
-                }
-                if poly.len() < 3 {
-                    return Err(err(ln, format!("face with {} corners", poly.len())));
-                }
-                triangle_count += poly.len() - 2;
-                if triangle_count > MAX_TRIANGLES {
-                    return Err(err(ln, format!("more than {MAX_TRIANGLES} triangles")));
-                }
-                let g = match current_group {
-                    Some(g) => g,
-                    None => {
-                        // Faces before any `g` line belong to OBJ's implicit group "default".
-                        group_names.push("default".to_owned());
-                        current_group = Some(group_names.len() - 1);
-                        group_names.len() - 1
-                    }
-                };
-                polygons.push(poly);
-                polygon_group.push(g);
-            }
-            _ => {}
-        }
-    }
-    Ok(ParsedObj {
-        positions,
-        polygons,
-        polygon_group,
-        group_names,
-    })
 }
 
 fn read_json(path: &Path) -> Result<serde_json::Value, MakeHumanError> {

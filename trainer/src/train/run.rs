@@ -1,0 +1,131 @@
+//! The whole run with a progress bar: warm start to convergence, image iterations, validation
+//! every few iterations, checkpoints, logs and plots.
+
+use super::*;
+
+impl Trainer {
+    /// Runs the remaining warm-start and image iterations, appending to `dir/losses.csv` and
+    /// writing `dir/checkpoint.safetensors` every `checkpoint_every` iterations and at the end.
+    /// Shows an indicatif progress bar with the current losses when `progress` is set.
+    pub fn run(&mut self, dir: &Path, progress: bool) -> Result<(), TrainError> {
+        let io = |path: &Path| {
+            let path = path.to_owned();
+            move |source: std::io::Error| TrainError::Io {
+                path: path.clone(),
+                source,
+            }
+        };
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        let csv_path = dir.join("losses.csv");
+        let mut csv = reopen_log(&csv_path, LossRecord::CSV_HEADER, self.done)?;
+        let warm_path = dir.join("warm_start.csv");
+        let mut warm_csv = reopen_log(
+            &warm_path,
+            "iteration,kl,position_cm2,position_relative",
+            self.warm_done,
+        )?;
+        let total = self.config.warm_start_iterations + self.config.iterations;
+        let bar = if progress {
+            indicatif::ProgressBar::new(total)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} {elapsed_precise} eta {eta} {msg}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar.set_position(self.warm_done + self.done);
+        let ckpt = dir.join("checkpoint.safetensors");
+        while self.warm_pending() {
+            let r = self.warm_step()?;
+            writeln!(
+                warm_csv,
+                "{},{:.6e},{:.6e},{:.6e}",
+                r.iteration, r.kl, r.position_cm2, r.position_relative
+            )
+            .map_err(io(&warm_path))?;
+            bar.set_message(format!(
+                "warm start KL {:.3e}, {:.3e} cm²",
+                r.kl, r.position_cm2
+            ));
+            bar.inc(1);
+            if self.config.checkpoint_every > 0
+                && self.warm_done.is_multiple_of(self.config.checkpoint_every)
+            {
+                warm_csv.flush().map_err(io(&warm_path))?;
+                self.save_checkpoint(&ckpt)?;
+            }
+        }
+        warm_csv.flush().map_err(io(&warm_path))?;
+        if self.warm_converged && self.warm_done < self.config.warm_start_iterations {
+            // The skipped warm-start iterations leave the progress bar.
+            bar.set_length(self.warm_done + self.config.iterations);
+        }
+        let validation_path = dir.join("validation.csv");
+        let done = self.done;
+        // Row 0 is the initial weights' score, rewritten by a run from the start.
+        let mut validation_csv = reopen_log_keeping(
+            &validation_path,
+            "iteration,silhouette_px,boundary_px,contour_px,iou",
+            |row| {
+                done > 0
+                    && row
+                        .split(',')
+                        .next()
+                        .and_then(|i| i.parse::<u64>().ok())
+                        .is_some_and(|i| i <= done)
+            },
+        )?;
+        if self.done == 0 && self.config.iterations > 0 {
+            let s = self.initial_score;
+            writeln!(
+                validation_csv,
+                "0,{:.6},{:.6},{:.6},{:.6}",
+                s.silhouette_px, s.boundary_px, s.contour_px, s.iou
+            )
+            .map_err(io(&validation_path))?;
+        }
+        while self.done < self.config.iterations {
+            let r = self.step()?;
+            writeln!(csv, "{}", r.csv_row()).map_err(io(&csv_path))?;
+            let every = self.config.validation_every;
+            if self.config.validation_frames > 0
+                && (self.done == self.config.iterations
+                    || (every > 0 && self.done.is_multiple_of(every)))
+            {
+                let s = self.validate_average()?;
+                writeln!(
+                    validation_csv,
+                    "{},{:.6},{:.6},{:.6},{:.6}",
+                    self.done, s.silhouette_px, s.boundary_px, s.contour_px, s.iou
+                )
+                .map_err(io(&validation_path))?;
+                validation_csv.flush().map_err(io(&validation_path))?;
+            }
+            bar.set_message(format!(
+                "total {:.3} sil {:.2}/{:.2}px lap {:.2e} skin {:.2e} part {:.2e}",
+                r.total,
+                r.silhouette_boundary,
+                r.silhouette_contour,
+                r.laplacian,
+                r.skinning,
+                r.partwise
+            ));
+            bar.inc(1);
+            if self.config.checkpoint_every > 0
+                && self.done.is_multiple_of(self.config.checkpoint_every)
+            {
+                csv.flush().map_err(io(&csv_path))?;
+                self.save_checkpoint(&ckpt)?;
+            }
+        }
+        csv.flush().map_err(io(&csv_path))?;
+        self.save_checkpoint(&ckpt)?;
+        let profile_path = dir.join("profile.csv");
+        std::fs::write(&profile_path, self.profile.csv()).map_err(io(&profile_path))?;
+        bar.finish();
+        Ok(())
+    }
+}
