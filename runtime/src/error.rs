@@ -2,7 +2,7 @@
 
 use alloc::string::String;
 
-use skinfield_formats::skf::SkfError;
+use skinfield_formats::skf::{SkfError, TensorName};
 use skinfield_formats::{PoseError, SkeletonError, SkinError};
 
 use crate::kernels::Kernel;
@@ -28,7 +28,7 @@ pub enum RuntimeError {
     #[error("tensor `{tensor}` holds a non-finite value at element {index}")]
     NonFiniteWeight {
         /// The tensor name.
-        tensor: &'static str,
+        tensor: TensorName,
         /// Element index.
         index: usize,
     },

@@ -152,43 +152,12 @@ pub struct SkinNet<W> {
 /// A SkinNet that owns its expanded weights.
 pub type SkinNetModel = SkinNet<Vec<f32>>;
 
-fn tensor_name(i: usize, n: usize, weight: bool) -> &'static str {
-    const W: [&str; MAX_LAYERS] = [
-        "skin.l0.weight",
-        "skin.l1.weight",
-        "skin.l2.weight",
-        "skin.l3.weight",
-        "skin.l4.weight",
-        "skin.l5.weight",
-        "skin.l6.weight",
-        "skin.l7.weight",
-        "skin.out.weight",
-    ];
-    const B: [&str; MAX_LAYERS] = [
-        "skin.l0.bias",
-        "skin.l1.bias",
-        "skin.l2.bias",
-        "skin.l3.bias",
-        "skin.l4.bias",
-        "skin.l5.bias",
-        "skin.l6.bias",
-        "skin.l7.bias",
-        "skin.out.bias",
-    ];
-    let k = if i == n {
-        MAX_LAYERS - 1
-    } else {
-        i.min(MAX_LAYERS - 2)
-    };
-    if weight { W[k] } else { B[k] }
-}
-
 /// Element `i` of `t`, finite, or an error naming the tensor.
-fn element(t: &TensorView<'_>, i: usize, name: &'static str) -> Result<f32, RuntimeError> {
+fn element(t: &TensorView<'_>, i: usize) -> Result<f32, RuntimeError> {
     match t.get(i) {
         Some(v) if v.is_finite() => Ok(v),
         _ => Err(RuntimeError::NonFiniteWeight {
-            tensor: name,
+            tensor: t.name,
             index: i,
         }),
     }
@@ -196,26 +165,24 @@ fn element(t: &TensorView<'_>, i: usize, name: &'static str) -> Result<f32, Runt
 
 /// Fills `out` (exactly `layout.total` floats) from the view.
 fn expand(view: &SkfView<'_>, layout: &Layout, out: &mut [f32]) -> Result<(), RuntimeError> {
-    let n = layout.count - 1;
     for (i, l) in layout.layers().iter().enumerate() {
         let (w, b) = view.layer(Net::Skin, i).ok_or(RuntimeError::Mismatch {
             field: "skin tensors",
         })?;
-        let (wn, bn) = (tensor_name(i, n, true), tensor_name(i, n, false));
         let ld = w.dims[1] as usize;
         let h_cols = if i == 0 { 0 } else { l.k_h };
         let h = &mut out[l.h_off..l.h_off + l.rows_p * l.k_h];
         // Hidden columns come first in the stored `[h, input]` order.
-        pack_panels(l.rows, l.k_h, h, |o, c| element(&w, o * ld + c, wn))?;
+        pack_panels(l.rows, l.k_h, h, |o, c| element(&w, o * ld + c))?;
         if let Some(pos_off) = l.pos_off {
             let pos = &mut out[pos_off..pos_off + l.rows_p * layout.pos_w];
             pack_panels(l.rows, layout.pos_w, pos, |o, c| {
-                element(&w, o * ld + h_cols + c, wn)
+                element(&w, o * ld + h_cols + c)
             })?;
             let pose = &mut out[l.pose_off..l.pose_off + l.rows * layout.pose_w];
             for (o, row) in pose.chunks_exact_mut(layout.pose_w).enumerate() {
                 for (c, v) in row.iter_mut().enumerate() {
-                    *v = element(&w, o * ld + h_cols + layout.pos_w + c, wn)?;
+                    *v = element(&w, o * ld + h_cols + layout.pos_w + c)?;
                 }
             }
         }
@@ -223,7 +190,7 @@ fn expand(view: &SkfView<'_>, layout: &Layout, out: &mut [f32]) -> Result<(), Ru
             .iter_mut()
             .enumerate()
         {
-            *v = if o < l.rows { element(&b, o, bn)? } else { 0.0 };
+            *v = if o < l.rows { element(&b, o)? } else { 0.0 };
         }
     }
     Ok(())

@@ -668,7 +668,7 @@ fn corrupt_or_non_finite_files_are_refused() {
     assert_eq!(
         SkinNetModel::from_skf(&bytes).err(),
         Some(RuntimeError::NonFiniteWeight {
-            tensor: "skin.l3.weight",
+            tensor: skinfield_formats::skf::TensorName::new("skin.l3.weight").unwrap(),
             index: 7
         })
     );

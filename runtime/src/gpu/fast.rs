@@ -10,7 +10,9 @@ use glam::Vec3;
 
 use super::GpuError;
 use super::layout::{GpuFastParams, SkinnedVertex, WORKGROUP_THREADS, entry};
-use super::skinner::{GpuMesh, GpuModel, GpuSkinner, pipeline, read_buffer, read_vertices};
+use super::mesh::{GpuMesh, read_buffer, read_vertices};
+use super::model::GpuModel;
+use super::skinner::{GpuSkinner, pipeline};
 use crate::fast::{FastMesh, Influence, MAX_INFLUENCES};
 use crate::{FrameState, Method, RuntimeError};
 

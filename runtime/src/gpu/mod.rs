@@ -22,7 +22,10 @@
 //!   output ([`GpuFastMesh`]).
 
 mod fast;
+mod frame;
 mod layout;
+mod mesh;
+mod model;
 mod skinner;
 
 pub use fast::{FastOutputs, GpuFastMesh, GpuFastOptions, TopKIndexFormat, TopKWeightFormat};
@@ -30,7 +33,9 @@ pub use layout::{
     GpuFastParams, GpuLayer, GpuParams, MAX_GPU_LAYERS, MAX_GPU_WIDTH, SKINNET_TILE, SkinnedVertex,
     WORKGROUP_THREADS, WeightFormat, shader_source,
 };
-pub use skinner::{GpuMesh, GpuModel, GpuSkinner};
+pub use mesh::GpuMesh;
+pub use model::GpuModel;
+pub use skinner::GpuSkinner;
 
 /// Why a GPU operation failed.
 #[derive(Debug, thiserror::Error)]
