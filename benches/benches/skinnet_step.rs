@@ -17,7 +17,7 @@ use skinfield_runtime::{BoundMesh, FrameState, Scratch, SkinNetModel, WeightsJob
 use skinfield_trainer::losses::lbs::{lbs, rest_homogeneous, skinning_tensor};
 use skinfield_trainer::optim::{Adam, AdamConfig};
 use skinfield_trainer::skinnet::export::to_skf_model;
-use skinfield_trainer::skinnet::{Activation, Backend, SkinNet, position_inputs_tensor};
+use skinfield_trainer::skinnet::{Activation, Backend, TrainableSkinNet, position_inputs_tensor};
 
 const JOINTS: u32 = 24;
 const FRAMES: usize = 4;
@@ -110,7 +110,7 @@ fn step(c: &mut Criterion) {
             ("fused", Backend::Fused),
             ("candle", Backend::Candle(Activation::SoftplusOp)),
         ] {
-            let (net, varmap) = SkinNet::seeded(x.config, 7, 1.0).unwrap();
+            let (net, varmap) = TrainableSkinNet::seeded(x.config, 7, 1.0).unwrap();
             let net = net.with_backend(backend);
             let mut opt = Adam::from_varmap(&varmap, AdamConfig::default()).unwrap();
             group.bench_function(format!("{name}/{threads}t"), |b| {
@@ -142,7 +142,7 @@ fn mlp(c: &mut Criterion) {
     let forward = forward_flops(&x.config, FRAMES, POINTS);
     let mut group = c.benchmark_group("skinnet_mlp_4x2500");
     group.sample_size(10);
-    let (net, _varmap) = SkinNet::seeded(x.config, 7, 1.0).unwrap();
+    let (net, _varmap) = TrainableSkinNet::seeded(x.config, 7, 1.0).unwrap();
     for threads in [1, 2] {
         let pool = pool(threads);
         // Forward + backward of the fused op alone: the backward executes twice the forward's

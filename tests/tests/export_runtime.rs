@@ -8,7 +8,7 @@ use skinfield_formats::math::Transform;
 use skinfield_formats::skf::ModelConfig;
 use skinfield_formats::{Pose, Skeleton, pose_features};
 use skinfield_runtime::SkinNetModel;
-use skinfield_trainer::skinnet::SkinNet;
+use skinfield_trainer::skinnet::TrainableSkinNet;
 use skinfield_trainer::skinnet::export::to_skf_model;
 
 const JOINTS: usize = 6;
@@ -41,7 +41,7 @@ fn runtime_cpu_weights_equal_candle_forward_on_the_exported_file() {
     let skel = skeleton();
     let config = ModelConfig::paper_architecture(JOINTS as u32, [-0.6, 0.0, -0.3], [0.6, 1.9, 0.3]);
     // Output scale 40: far from uniform weights, so a wrong layer would show.
-    let (net, _vars) = SkinNet::seeded(config, 42, 40.0).unwrap();
+    let (net, _vars) = TrainableSkinNet::seeded(config, 42, 40.0).unwrap();
     let bytes = to_skf_model(&net, &skel).unwrap().to_bytes().unwrap();
 
     let mut rng = ChaCha8Rng::seed_from_u64(7);

@@ -13,7 +13,7 @@ use skinfield_runtime::SkinNetModel;
 use skinfield_runtime::candidates::nearest_anchors;
 use skinfield_trainer::candidates::additive_mask;
 use skinfield_trainer::skinnet::export::to_skf_model;
-use skinfield_trainer::skinnet::{SkinNet, position_inputs_tensor};
+use skinfield_trainer::skinnet::{TrainableSkinNet, position_inputs_tensor};
 
 fn chain(j: usize) -> Skeleton {
     let t = Transform {
@@ -36,7 +36,7 @@ fn chain(j: usize) -> Skeleton {
 fn runtime_masked_weights_equal_the_trainers() {
     let j = 6;
     let config = ModelConfig::paper_architecture(j as u32, [-1.0; 3], [1.0; 3]);
-    let (net, _vars) = SkinNet::seeded(config, 4, 3.0).unwrap();
+    let (net, _vars) = TrainableSkinNet::seeded(config, 4, 3.0).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let mut point = || {
         Vec3::new(

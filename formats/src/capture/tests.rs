@@ -4,6 +4,9 @@ use glam::{Mat4, Quat, Vec3};
 
 use super::*;
 use crate::camera::Camera;
+use crate::math::Transform;
+use crate::mesh::PartLabel;
+use crate::skeleton::{Axis, JointDofs};
 
 fn skeleton() -> Skeleton {
     Skeleton::new(

@@ -4,7 +4,9 @@ use skinfield_formats::skf::{ModelConfig, Net, SkfModel, SkfView};
 
 use super::*;
 use crate::skinnet::export::to_skf_model;
-use crate::skinnet::{SkinNet, position_inputs, position_inputs_tensor, softplus::softplus_scalar};
+use crate::skinnet::{
+    TrainableSkinNet, position_inputs, position_inputs_tensor, softplus::softplus_scalar,
+};
 
 fn small_config() -> ModelConfig {
     let mut c = ModelConfig::paper_architecture(3, [-1.0; 3], [1.0; 3]);
@@ -118,7 +120,7 @@ fn forward_matches_a_scalar_reference_and_shading_is_positive() {
 #[test]
 fn skf_round_trip_keeps_the_outputs_and_missing_nets_are_named() {
     let cfg = small_config();
-    let (net, _vars) = SkinNet::seeded(cfg, 1, 1.0).unwrap();
+    let (net, _vars) = TrainableSkinNet::seeded(cfg, 1, 1.0).unwrap();
     let skel = crate::skinnet::tests::skeleton(cfg.joint_count as usize);
     let mut model: SkfModel = to_skf_model(&net, &skel).unwrap();
     let plain = model.to_bytes().unwrap();

@@ -5,7 +5,7 @@ use std::path::Path;
 use skinfield_formats::Skeleton;
 use skinfield_formats::skf::{Net, SkfFileError, SkfModel};
 
-use super::SkinNet;
+use super::TrainableSkinNet;
 
 /// Why an export failed.
 #[derive(Debug, thiserror::Error)]
@@ -28,7 +28,7 @@ pub enum ExportError {
 
 /// The model as `.skf` content: every layer's folded weight `g ⊙ v/‖v‖` and bias, in f32 (the
 /// writer rounds to f16).
-pub fn to_skf_model(net: &SkinNet, skeleton: &Skeleton) -> Result<SkfModel, ExportError> {
+pub fn to_skf_model(net: &TrainableSkinNet, skeleton: &Skeleton) -> Result<SkfModel, ExportError> {
     let joints = net.config().joint_count as usize;
     if skeleton.len() != joints {
         return Err(ExportError::JointCount {
@@ -56,7 +56,11 @@ pub fn to_skf_model(net: &SkinNet, skeleton: &Skeleton) -> Result<SkfModel, Expo
 }
 
 /// Writes the model to `path` atomically.
-pub fn write_skf(net: &SkinNet, skeleton: &Skeleton, path: &Path) -> Result<(), ExportError> {
+pub fn write_skf(
+    net: &TrainableSkinNet,
+    skeleton: &Skeleton,
+    path: &Path,
+) -> Result<(), ExportError> {
     to_skf_model(net, skeleton)?.write(path)?;
     Ok(())
 }

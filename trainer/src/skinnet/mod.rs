@@ -84,9 +84,11 @@ impl WnLinear {
     }
 }
 
-/// SkinNet: weight-normalised MLP with a skip connection, Softplus, softmax over joints.
+/// SkinNet as trained: candle variables of the weight-normalised MLP (skip connection,
+/// Softplus, softmax over joints), differentiable. The runtime's `SkinNet` is the same network
+/// expanded for inference from the exported `.skf`.
 #[derive(Clone, Debug)]
-pub struct SkinNet {
+pub struct TrainableSkinNet {
     config: ModelConfig,
     layers: Vec<WnLinear>,
     backend: Backend,
@@ -97,7 +99,7 @@ pub struct SkinNet {
 /// Parameter-name prefix of SkinNet inside a [`VarMap`] (matches [`Net::prefix`]).
 pub const PREFIX: &str = "skin";
 
-impl SkinNet {
+impl TrainableSkinNet {
     /// Builds the layers from a `VarBuilder` already scoped to the net (e.g. `vb.pp("skin")`);
     /// layer `i` reads `l{i}.v`, `l{i}.g`, `l{i}.b`.
     pub fn new(vb: &VarBuilder, config: ModelConfig) -> Result<Self> {
@@ -184,7 +186,7 @@ impl SkinNet {
         self.forward_masked(positions, poses, None)
     }
 
-    /// [`SkinNet::forward`] with the softmax restricted to candidate joints: `mask` is `[V, J]`,
+    /// [`TrainableSkinNet::forward`] with the softmax restricted to candidate joints: `mask` is `[V, J]`,
     /// 0 where joint `j` is a candidate of vertex `v` and −∞ elsewhere ([`crate::candidates`]).
     pub fn forward_masked(
         &self,
@@ -256,7 +258,7 @@ impl SkinNet {
     }
 }
 
-impl SkinNet {
+impl TrainableSkinNet {
     /// Convenience for exporters and cross-checks: weights of canonical `points` for each pose
     /// feature vector in `poses` (each `3J`), flattened `[F, V, J]` row-major.
     pub fn evaluate(&self, points: &[Vec3], poses: &[Vec<f32>]) -> Result<Vec<f32>> {
@@ -326,7 +328,7 @@ pub fn varmap_from_skf(view: &SkfView, net: Net) -> std::result::Result<VarMap, 
     Ok(varmap)
 }
 
-impl SkinNet {
+impl TrainableSkinNet {
     /// SkinNet as stored in a parsed `.skf` ([`varmap_from_skf`]), with the variables holding
     /// its parameters (f32, CPU).
     pub fn from_skf(view: &SkfView) -> std::result::Result<(Self, VarMap), SkfNetError> {
@@ -338,7 +340,7 @@ impl SkinNet {
     }
 }
 
-/// [`SkinNet::init_varmap`] for any of the file's nets (the appearance nets share SkinNet's
+/// [`TrainableSkinNet::init_varmap`] for any of the file's nets (the appearance nets share SkinNet's
 /// hyper-parameters, paper supplementary D): layer `i` of `net` under `{prefix}.l{i}.{v,g,b}`.
 pub fn init_net_varmap(
     varmap: &VarMap,

@@ -38,7 +38,7 @@ fn naive_forward(config: &ModelConfig, layers: &[Plain], pos: &[f32], pose: &[f3
     h.iter().map(|x| (x - m).exp() / s).collect()
 }
 
-fn plain_layers(net: &SkinNet) -> Vec<Plain> {
+fn plain_layers(net: &TrainableSkinNet) -> Vec<Plain> {
     net.layers()
         .iter()
         .map(|l| {
@@ -100,7 +100,7 @@ fn encoding_order_is_x_then_sin_cos_per_frequency() {
 #[test]
 fn forward_equals_naive_loops_for_every_frame_and_vertex() {
     let c = config(5);
-    let (net, _vm) = SkinNet::seeded(c, 7, 1.0).unwrap();
+    let (net, _vm) = TrainableSkinNet::seeded(c, 7, 1.0).unwrap();
     let pts = random_points(6, 1);
     let poses = random_poses(3, 5, 2);
     let enc = position_inputs(&c, &pts);
@@ -143,7 +143,7 @@ fn forward_equals_naive_loops_for_every_frame_and_vertex() {
 #[test]
 fn composite_activation_gives_the_same_output() {
     let c = config(3);
-    let (net, _vm) = SkinNet::seeded(c, 3, 1.0).unwrap();
+    let (net, _vm) = TrainableSkinNet::seeded(c, 3, 1.0).unwrap();
     let enc = position_inputs_tensor(&c, &random_points(50, 4), &Device::Cpu).unwrap();
     let poses = Tensor::from_vec(random_poses(2, 3, 5), (2, 9), &Device::Cpu).unwrap();
     let a = net.forward(&enc, &poses).unwrap();
@@ -164,8 +164,8 @@ fn composite_activation_gives_the_same_output() {
 }
 
 /// f64 copy of a seeded net, so finite differences are accurate.
-fn f64_net(c: ModelConfig, seed: u64) -> (SkinNet, VarMap) {
-    let (_, vm32) = SkinNet::seeded(c, seed, 1.0).unwrap();
+fn f64_net(c: ModelConfig, seed: u64) -> (TrainableSkinNet, VarMap) {
+    let (_, vm32) = TrainableSkinNet::seeded(c, seed, 1.0).unwrap();
     let vm = VarMap::new();
     {
         let src = vm32.data().lock().unwrap();
@@ -178,7 +178,7 @@ fn f64_net(c: ModelConfig, seed: u64) -> (SkinNet, VarMap) {
         }
     }
     let vb = VarBuilder::from_varmap(&vm, DType::F64, &Device::Cpu);
-    (SkinNet::new(&vb.pp(PREFIX), c).unwrap(), vm)
+    (TrainableSkinNet::new(&vb.pp(PREFIX), c).unwrap(), vm)
 }
 
 #[test]
@@ -198,7 +198,7 @@ fn parameter_gradients_match_finite_differences() {
         .map(|_| rng.random_range(-1.0..1.0))
         .collect();
     let r = Tensor::from_vec(r, (2, 8, 4), &Device::Cpu).unwrap();
-    let loss = |net: &SkinNet| {
+    let loss = |net: &TrainableSkinNet| {
         net.forward(&enc, &poses)
             .unwrap()
             .mul(&r)
@@ -275,7 +275,7 @@ pub(crate) fn skeleton(j: usize) -> Skeleton {
 fn exported_skf_evaluates_like_candle() {
     let c = config(6);
     // A larger output scale so the softmax is far from uniform and errors would show.
-    let (net, _vm) = SkinNet::seeded(c, 21, 4.0).unwrap();
+    let (net, _vm) = TrainableSkinNet::seeded(c, 21, 4.0).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("model.skf");
     export::write_skf(&net, &skeleton(6), &path).unwrap();
@@ -332,7 +332,7 @@ fn exported_skf_evaluates_like_candle() {
 
 #[test]
 fn export_rejects_a_skeleton_of_the_wrong_size() {
-    let (net, _vm) = SkinNet::seeded(config(3), 1, 1.0).unwrap();
+    let (net, _vm) = TrainableSkinNet::seeded(config(3), 1, 1.0).unwrap();
     assert!(matches!(
         export::to_skf_model(&net, &skeleton(4)),
         Err(export::ExportError::JointCount {

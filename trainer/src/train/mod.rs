@@ -51,7 +51,7 @@ use crate::losses::partwise::PartwiseReg;
 use crate::losses::silhouette::{BatchView, EdgeTable, SilhouetteLoss};
 use crate::losses::skinning_reg::GeodesicSkinningReg;
 use crate::optim::Adam;
-use crate::skinnet::{PREFIX, SkinNet, position_inputs_tensor, softmax_last};
+use crate::skinnet::{PREFIX, TrainableSkinNet, position_inputs_tensor, softmax_last};
 use candidate_mask::Candidates;
 pub(crate) use checkpoint::{
     insert_varmap, load_tensors, read_u64s, restore_varmap, save_tensors, split_u64,
@@ -69,7 +69,7 @@ enum Model {
     /// SkinNet with the training vertices' encoded positions `[V, 3 + 6L]`, and with
     /// [`TrainData::queries`] the full-resolution query points' `[N, 3 + 6L]`.
     Net {
-        net: SkinNet,
+        net: TrainableSkinNet,
         encoded: Tensor,
         query_encoded: Option<Tensor>,
     },
@@ -246,7 +246,7 @@ impl Trainer {
                 .insert("static.logits".into(), var.clone());
             Model::Static { logits: var }
         } else {
-            SkinNet::init_varmap(
+            TrainableSkinNet::init_varmap(
                 &varmap,
                 &mc,
                 PREFIX,
@@ -256,7 +256,7 @@ impl Trainer {
             )?;
             let vb = VarBuilder::from_varmap(&varmap, DType::F32, &dev);
             Model::Net {
-                net: SkinNet::new(&vb.pp(PREFIX), mc)?,
+                net: TrainableSkinNet::new(&vb.pp(PREFIX), mc)?,
                 encoded: position_inputs_tensor(&mc, &t.positions, &dev)?,
                 query_encoded: match &data.queries {
                     Some(q) => Some(position_inputs_tensor(&mc, &q.positions, &dev)?),
@@ -546,7 +546,7 @@ impl Trainer {
 
     /// The network (`None` for the static baseline).
     #[must_use]
-    pub fn net(&self) -> Option<&SkinNet> {
+    pub fn net(&self) -> Option<&TrainableSkinNet> {
         match &self.model {
             Model::Net { net, .. } => Some(net),
             Model::Static { .. } => None,

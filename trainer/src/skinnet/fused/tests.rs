@@ -11,7 +11,7 @@ use skinfield_formats::skf::{ModelConfig, SkfView};
 use super::ParamLayout;
 use crate::optim::{Adam, AdamConfig};
 use crate::skinnet::export::to_skf_model;
-use crate::skinnet::{Activation, Backend, PREFIX, SkinNet, position_inputs_tensor};
+use crate::skinnet::{Activation, Backend, PREFIX, TrainableSkinNet, position_inputs_tensor};
 
 fn random_points(n: usize, seed: u64) -> Vec<Vec3> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -33,7 +33,7 @@ fn random_values(n: usize, scale: f32, seed: u64) -> Vec<f32> {
 
 /// A net of `config` whose variables are a copy of `vars` in `dtype` (so the same parameters can
 /// be run through both backends and both precisions).
-fn copy_net(config: ModelConfig, vars: &VarMap, dtype: DType) -> (SkinNet, VarMap) {
+fn copy_net(config: ModelConfig, vars: &VarMap, dtype: DType) -> (TrainableSkinNet, VarMap) {
     let copy = VarMap::new();
     {
         let src = vars.data().lock().unwrap();
@@ -46,7 +46,7 @@ fn copy_net(config: ModelConfig, vars: &VarMap, dtype: DType) -> (SkinNet, VarMa
         }
     }
     let vb = VarBuilder::from_varmap(&copy, dtype, &Device::Cpu);
-    (SkinNet::new(&vb.pp(PREFIX), config).unwrap(), copy)
+    (TrainableSkinNet::new(&vb.pp(PREFIX), config).unwrap(), copy)
 }
 
 /// A loss that weighs every output differently and is not linear in it, so every path of the
@@ -161,7 +161,7 @@ fn check_masked(
 }
 
 fn seeded_vars(config: ModelConfig, seed: u64) -> VarMap {
-    SkinNet::seeded(config, seed, 1.0).unwrap().1
+    TrainableSkinNet::seeded(config, seed, 1.0).unwrap().1
 }
 
 #[test]
@@ -216,7 +216,7 @@ fn gradients_equal_candle_on_a_trained_net_read_from_a_skf() {
     // Train a small paper-shaped net towards peaked, position-dependent weights (so its
     // softmax saturates as a trained SkinNet's does), export it, read it back and compare.
     let config = ModelConfig::paper_architecture(4, [-1.0; 3], [1.0; 3]);
-    let (net, varmap) = SkinNet::seeded(config, 3, 0.1).unwrap();
+    let (net, varmap) = TrainableSkinNet::seeded(config, 3, 0.1).unwrap();
     let dev = Device::Cpu;
     let pts = random_points(64, 9);
     let enc = position_inputs_tensor(&config, &pts, &dev).unwrap();
@@ -245,14 +245,14 @@ fn gradients_equal_candle_on_a_trained_net_read_from_a_skf() {
     let skeleton = crate::skinnet::tests::skeleton(4);
     let bytes = to_skf_model(&net, &skeleton).unwrap().to_bytes().unwrap();
     let view = SkfView::parse(&bytes).unwrap();
-    let (loaded, vars) = SkinNet::from_skf(&view).unwrap();
+    let (loaded, vars) = TrainableSkinNet::from_skf(&view).unwrap();
     check_against_candle(*loaded.config(), &vars, 4, 50, 21);
 }
 
 #[test]
 fn a_step_is_deterministic_and_a_second_backward_recomputes() {
     let config = ModelConfig::paper_architecture(6, [-1.0; 3], [1.0; 3]);
-    let (net, varmap) = SkinNet::seeded(config, 5, 1.0).unwrap();
+    let (net, varmap) = TrainableSkinNet::seeded(config, 5, 1.0).unwrap();
     let dev = Device::Cpu;
     let enc = position_inputs_tensor(&config, &random_points(40, 2), &dev).unwrap();
     let q = config.pose_width();
@@ -288,7 +288,7 @@ fn a_step_is_deterministic_and_a_second_backward_recomputes() {
 #[test]
 fn the_layout_matches_the_packed_parameters() {
     let config = ModelConfig::paper_architecture(7, [-1.0; 3], [1.0; 3]);
-    let (net, _vars) = SkinNet::seeded(config, 1, 1.0).unwrap();
+    let (net, _vars) = TrainableSkinNet::seeded(config, 1, 1.0).unwrap();
     let layout = ParamLayout::new(&config);
     let packed = net.packed_parameters().unwrap().to_vec1::<f32>().unwrap();
     assert_eq!(packed.len(), layout.len());
