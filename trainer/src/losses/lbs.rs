@@ -99,4 +99,64 @@ mod tests {
             lbs(w, &s, &rest).unwrap().sqr().unwrap().sum_all().unwrap()
         });
     }
+
+    /// The differentiable twin of the runtime's LBS: on random affine joints and random
+    /// weights, equal to `StaticSkinJob` (what ships) up to float rounding.
+    #[test]
+    fn equals_the_runtimes_static_skinning() {
+        use rand::{Rng, SeedableRng};
+        use skinfield_formats::StaticSkin;
+        use skinfield_runtime::{Method, Palette, StaticSkinJob};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (v, j) = (40, 5);
+        let mats: Vec<Mat4> = (0..j)
+            .map(|_| {
+                Mat4::from_scale_rotation_translation(
+                    Vec3::splat(rng.random_range(0.8..1.2)),
+                    Quat::from_rotation_arc(
+                        Vec3::Y,
+                        Vec3::new(rng.random(), rng.random(), rng.random()).normalize(),
+                    ),
+                    Vec3::new(rng.random(), rng.random(), rng.random()),
+                )
+            })
+            .collect();
+        let rest: Vec<Vec3> = (0..v)
+            .map(|_| Vec3::new(rng.random(), rng.random(), rng.random()) * 2.0 - Vec3::ONE)
+            .collect();
+        let mut dense = vec![0.0f32; v * j];
+        for row in dense.chunks_mut(j) {
+            row.iter_mut().for_each(|w| *w = rng.random_range(0.0..1.0));
+            let sum: f32 = row.iter().sum();
+            row.iter_mut().for_each(|w| *w /= sum);
+        }
+        let dev = Device::Cpu;
+        let w = Tensor::from_vec(dense.clone(), (1, v, j), &dev).unwrap();
+        let s = skinning_tensor(std::slice::from_ref(&mats), &dev).unwrap();
+        let ours = lbs(&w, &s, &rest_homogeneous(&rest, &dev).unwrap())
+            .unwrap()
+            .to_vec3::<f32>()
+            .unwrap();
+        let skin = StaticSkin::from_dense(&dense, j).unwrap();
+        let mut palette = Palette::new(j);
+        palette.set_matrices(&mats).unwrap();
+        let mut shipped = vec![Vec3::ZERO; v];
+        StaticSkinJob {
+            skin: &skin,
+            palette: &palette,
+            method: Method::Lbs,
+            first_vertex: 0,
+            rest_positions: &rest,
+            rest_normals: None,
+            rest_tangents: None,
+            out_positions: &mut shipped,
+            out_normals: None,
+            out_tangents: None,
+        }
+        .run()
+        .unwrap();
+        for (a, b) in ours[0].iter().zip(&shipped) {
+            assert!((Vec3::from_slice(a) - *b).length() < 1e-5, "{a:?} vs {b}");
+        }
+    }
 }
