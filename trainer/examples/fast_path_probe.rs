@@ -1,0 +1,167 @@
+//! Lab probe for the runtime's fast path (issue 18): where and why it deviates from the exact
+//! path on a trained model, and how two alternative weight interpolations would do.
+//!
+//! ```text
+//! cargo run -p skinfield-trainer --example fast_path_probe -- CAPTURE_DIR MODEL.skf [none|clamp|log]
+//! ```
+//!
+//! For every test frame it skins the capture's template with the exact path and with the fast
+//! path (default options, LBS), and prints the mean vertex deviation, how many vertex-frames
+//! have a negative interpolated weight, and the worst vertices. `clamp` re-skins the vertices
+//! with negative weights after clamping them to zero and renormalising; `log` replaces the
+//! fast path's additive interpolation `B_v + Σ a_vi (w_n(θ) − B_n)` by interpolating the
+//! nodes' log-weight changes, `w_v ∝ B_v ⊙ exp(Σ a_vi (ln w_n(θ) − ln B_n))` (equivalently the
+//! logit changes, since a softmax's log-normaliser cancels), which is non-negative by
+//! construction. Both variants use the exact weights at the nodes, as the fast path does.
+use skinfield_formats::capture::load_capture;
+use skinfield_runtime::*;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let capture = load_capture(&args[0]).unwrap();
+    let model = SkinNetModel::from_skf(&std::fs::read(&args[1]).unwrap()).unwrap();
+    let mode = args.get(2).cloned().unwrap_or_default();
+    let clamp = mode == "clamp";
+    let logspace = mode == "log";
+    let t = &capture.template;
+    let n = t.positions.len();
+    let j = model.joint_count();
+    let mesh = BoundMesh::bind(&model, &t.positions).unwrap();
+    let fast = FastMesh::bind(&model, &t.positions, &t.triangles, &FastOptions::DEFAULT).unwrap();
+    let mut frame = FrameState::new(&model);
+    let mut scratch = Scratch::new(&model);
+    let mut nodes = FastFrame::new(&fast);
+    let (mut pe, mut pf) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n]);
+    let mut we = vec![0.0f32; n * j];
+    let mut wf = vec![0.0f32; n * j];
+    let mut all = Vec::new();
+    // Exact bind-pose weights of every vertex (the log-space variant's base).
+    let mut wb = vec![0.0f32; n * j];
+    frame
+        .set_pose(&model, &model.skeleton().bind_pose())
+        .unwrap();
+    WeightsJob {
+        model: &model,
+        mesh: &mesh,
+        frame: &frame,
+        first_vertex: 0,
+        out_weights: &mut wb,
+    }
+    .run(&mut scratch)
+    .unwrap();
+    let k = fast.options().neighbours;
+    let interp = fast.interpolation().to_vec();
+    let node_v = fast.node_vertices().to_vec();
+    let mut neg_total = 0usize;
+    for &f in &capture.test_frames {
+        frame.set_pose(&model, &capture.poses[f]).unwrap();
+        SkinJob {
+            model: &model,
+            mesh: &mesh,
+            frame: &frame,
+            method: Method::Lbs,
+            first_vertex: 0,
+            rest_normals: None,
+            rest_tangents: None,
+            out_positions: &mut pe,
+            out_normals: None,
+            out_tangents: None,
+            out_weights: Some(&mut we),
+        }
+        .run(&mut scratch)
+        .unwrap();
+        nodes.update(&model, &fast, &frame, &mut scratch).unwrap();
+        FastSkinJob {
+            mesh: &fast,
+            frame: &frame,
+            nodes: &nodes,
+            method: Method::Lbs,
+            influences: 8,
+            first_vertex: 0,
+            rest_normals: None,
+            rest_tangents: None,
+            out_positions: &mut pf,
+            out_normals: None,
+            out_tangents: None,
+            out_weights: Some(&mut wf),
+        }
+        .run()
+        .unwrap();
+        if clamp {
+            // Clamp negatives, renormalise, re-skin with LBS of the clamped weights.
+            let mats = frame.palette().matrices();
+            for v in 0..n {
+                let w = &mut wf[v * j..(v + 1) * j];
+                if w.iter().any(|&x| x < 0.0) {
+                    w.iter_mut().for_each(|x| *x = x.max(0.0));
+                    let s: f32 = w.iter().sum();
+                    w.iter_mut().for_each(|x| *x /= s);
+                    let m = (0..j).fold(Mat4::ZERO, |a, k| a + mats[k] * w[k]);
+                    pf[v] = m.transform_point3(t.positions[v]);
+                }
+            }
+        }
+        if logspace {
+            let mats = frame.palette().matrices();
+            for v in 0..n {
+                let mut acc = vec![0.0f64; j];
+                for e in &interp[v * k..(v + 1) * k] {
+                    let nv = node_v[e.index as usize] as usize;
+                    for jj in 0..j {
+                        let (b, w) = (wb[nv * j + jj], we[nv * j + jj]);
+                        if b > 1e-12 && w > 1e-12 {
+                            acc[jj] +=
+                                f64::from(e.weight) * (f64::from(w).ln() - f64::from(b).ln());
+                        }
+                    }
+                }
+                let w = &mut wf[v * j..(v + 1) * j];
+                for jj in 0..j {
+                    w[jj] = (f64::from(wb[v * j + jj]) * acc[jj].exp()) as f32;
+                }
+                let s: f32 = w.iter().sum();
+                w.iter_mut().for_each(|x| *x /= s);
+                let m = (0..j).fold(Mat4::ZERO, |a, q| a + mats[q] * w[q]);
+                pf[v] = m.transform_point3(t.positions[v]);
+            }
+        }
+        for v in 0..n {
+            let d = pe[v].distance(pf[v]);
+            let w = &wf[v * j..(v + 1) * j];
+            let minw = w.iter().cloned().fold(f32::INFINITY, f32::min);
+            if minw < -1e-4 {
+                neg_total += 1;
+            }
+            let l1: f32 = w
+                .iter()
+                .zip(&we[v * j..(v + 1) * j])
+                .map(|(a, b)| (a - b).abs())
+                .sum();
+            all.push((d, f, v, minw, l1));
+        }
+    }
+    all.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mean: f32 = all.iter().map(|x| x.0).sum::<f32>() / all.len() as f32;
+    println!(
+        "mean deviation {:.4} cm, vertex-frames with a weight < -1e-4: {} of {}",
+        100.0 * mean,
+        neg_total,
+        all.len()
+    );
+    for x in &all[..12] {
+        println!(
+            "dev {:.3} cm frame {} vertex {} min weight {:.4} L1 to exact {:.3}",
+            100.0 * x.0,
+            x.1,
+            x.2,
+            x.3,
+            x.4
+        );
+    }
+    let neg: Vec<_> = all.iter().filter(|x| x.3 < -1e-4).collect();
+    let negmean = neg.iter().map(|x| x.0).sum::<f32>() / neg.len().max(1) as f32;
+    println!(
+        "mean deviation where a weight is negative: {:.3} cm",
+        100.0 * negmean
+    );
+}
