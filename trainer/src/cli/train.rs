@@ -204,7 +204,10 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
             )
         })?
     {
-        eprintln!("warning: {worse}; written anyway (--allow-worse).");
+        eprintln!(
+            "warning: {worse}; written anyway (--allow-worse, or `refuse_worse_than_initial: false` \
+             in the configuration)."
+        );
     }
     Ok(())
 }
