@@ -15,7 +15,7 @@
 use std::path::Path;
 use std::process::ExitCode;
 
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Mat4, Vec3};
 use skinfield_formats::gltf_io::load_gltf;
 use skinfield_runtime::{
     BoundMesh, FrameState, JointMap, Method, Scratch, SkinJob, SkinNetModel, Transform,
@@ -76,20 +76,9 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .map(|&j| skin.skeleton.inverse_bind()[j])
         .collect();
-    let to_model = map.bind_space(model.skeleton(), &ibms, 1e-3)?;
-    let normal_matrix = Mat3::from_mat4(to_model).inverse().transpose();
-    let positions: Vec<Vec3> = skin
-        .template
-        .positions
-        .iter()
-        .map(|&p| to_model.transform_point3(p))
-        .collect();
-    let normals: Vec<Vec3> = skin
-        .template
-        .normals
-        .iter()
-        .map(|&n| (normal_matrix * n).normalize_or_zero())
-        .collect();
+    let space = map.bind_space(model.skeleton(), &ibms, 1e-3)?;
+    let positions = space.positions(&skin.template.positions);
+    let normals = space.normals(&skin.template.normals);
     let n = positions.len();
     let mut mesh_bytes = (n as u64).to_le_bytes().to_vec();
     for v in positions.iter().chain(&normals) {

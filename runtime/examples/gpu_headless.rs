@@ -54,18 +54,11 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     // into the model's canonical space (see `JointMap::bind_space`).
     let model = SkinNetModel::from_skf(&bytes)?;
     let map = JointMap::new(model.skeleton(), skin.skeleton.names())?;
-    let to_model = map.bind_space(model.skeleton(), skin.skeleton.inverse_bind(), 1e-3)?;
-    let normal_matrix = glam::Mat3::from_mat4(to_model).inverse().transpose();
-    let positions: Vec<Vec3> = rest
-        .positions
-        .iter()
-        .map(|&p| to_model.transform_point3(p))
-        .collect();
-    let normals: Vec<Vec3> = rest
-        .normals
-        .iter()
-        .map(|&n| (normal_matrix * n).normalize_or_zero())
-        .collect();
+    let space = map.bind_space(model.skeleton(), skin.skeleton.inverse_bind(), 1e-3)?;
+    let (positions, normals) = (
+        space.positions(&rest.positions),
+        space.normals(&rest.normals),
+    );
     let mesh = BoundMesh::bind(&model, &positions)?;
     let gpu_mesh = skinner.bind_mesh(&device, &queue, &gpu_model, &positions, &normals)?;
     let mut frame = FrameState::new(&model);

@@ -16,7 +16,6 @@ use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use glam::Mat3;
 use skinfield_formats::gltf_io::{GltfSkin, load_gltf};
 use skinfield_runtime::{
     BoundMesh, FrameState, InterleavedJob, JointMap, Mat4, Method, Palette, Scratch, SkinNetModel,
@@ -79,19 +78,12 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .map(|&j| skin.skeleton.inverse_bind()[j])
         .collect();
-    let to_model = map.bind_space(model.skeleton(), &engine_ibms, 1e-3)?;
-    let normal_matrix = Mat3::from_mat4(to_model).inverse().transpose();
+    let space = map.bind_space(model.skeleton(), &engine_ibms, 1e-3)?;
     let rest = &skin.template;
-    let positions: Vec<Vec3> = rest
-        .positions
-        .iter()
-        .map(|&p| to_model.transform_point3(p))
-        .collect();
-    let normals: Vec<Vec3> = rest
-        .normals
-        .iter()
-        .map(|&n| (normal_matrix * n).normalize_or_zero())
-        .collect();
+    let (positions, normals) = (
+        space.positions(&rest.positions),
+        space.normals(&rest.normals),
+    );
     let mesh = BoundMesh::bind(&model, &positions)?;
     let clip = match clip_arg.first() {
         Some(name) => doc.clip(name).ok_or(format!("no clip named `{name}`"))?,

@@ -12,13 +12,55 @@ use alloc::format;
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use glam::Mat4;
+use glam::{Mat3, Mat4, Vec3};
 use skinfield_formats::{Pose, Skeleton, Transform};
 
 use crate::error::RuntimeError;
 
 /// How many missing names [`RuntimeError::MissingJoints`] spells out (the count is exact).
 const MISSING_NAMES_SHOWN: usize = 8;
+
+/// The transform from an engine's bind space to a model's canonical space
+/// ([`JointMap::bind_space`]), applied to a mesh's rest positions and normals at load time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BindSpace {
+    to_model: Mat4,
+    /// Inverse transpose of the linear part, for normals.
+    normal: Mat3,
+}
+
+impl BindSpace {
+    fn new(to_model: Mat4) -> Self {
+        Self {
+            to_model,
+            normal: Mat3::from_mat4(to_model).inverse().transpose(),
+        }
+    }
+
+    /// The transform itself.
+    #[must_use]
+    pub fn matrix(&self) -> Mat4 {
+        self.to_model
+    }
+
+    /// Rest positions in the model's canonical space (what [`crate::BoundMesh::bind`] takes).
+    #[must_use]
+    pub fn positions(&self, positions: &[Vec3]) -> Vec<Vec3> {
+        positions
+            .iter()
+            .map(|&p| self.to_model.transform_point3(p))
+            .collect()
+    }
+
+    /// Rest normals in the model's canonical space (unit length; zero stays zero).
+    #[must_use]
+    pub fn normals(&self, normals: &[Vec3]) -> Vec<Vec3> {
+        normals
+            .iter()
+            .map(|&n| (self.normal * n).normalize_or_zero())
+            .collect()
+    }
+}
 
 /// For every model joint, the index of the engine joint of the same name.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -202,7 +244,7 @@ impl JointMap {
         model: &Skeleton,
         engine_inverse_binds: &[Mat4],
         tolerance: f32,
-    ) -> Result<Mat4, RuntimeError> {
+    ) -> Result<BindSpace, RuntimeError> {
         self.check_model(model)?;
         if engine_inverse_binds.len() != self.engine_joint_count {
             return Err(RuntimeError::BufferLength {
@@ -243,7 +285,7 @@ impl JointMap {
                 });
             }
         }
-        Ok(reference)
+        Ok(BindSpace::new(reference))
     }
 
     fn check_model(&self, model: &Skeleton) -> Result<(), RuntimeError> {
@@ -400,11 +442,14 @@ mod bind_space_tests {
         let names: Vec<&str> = order.iter().map(|&j| engine.names()[j].as_str()).collect();
         let ibms: Vec<Mat4> = order.iter().map(|&j| engine.inverse_bind()[j]).collect();
         let map = JointMap::new(&model, &names).unwrap();
-        let m = map.bind_space(&model, &ibms, 1e-4).unwrap();
-        // A point of the engine's bind space lands where the model's bind pose has it.
+        let space = map.bind_space(&model, &ibms, 1e-4).unwrap();
+        // A point of the engine's bind space lands where the model's bind pose has it, and a
+        // normal turns with the rotation only.
         let x = Vec3::new(1.0, 2.0, 3.0);
         let want = armature.inverse().transform_point3(x);
-        assert!(m.transform_point3(x).distance(want) < 1e-5 * want.length());
+        assert!(space.positions(&[x])[0].distance(want) < 1e-5 * want.length());
+        let n = space.normals(&[Vec3::Y])[0];
+        assert!(n.distance(armature.inverse().transform_vector3(Vec3::Y).normalize()) < 1e-5);
 
         // A joint bent differently in the engine's bind pose is named.
         let mut bent = ibms.clone();

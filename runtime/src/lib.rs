@@ -62,7 +62,7 @@ pub use fast::{
 pub use frame::{FrameState, Palette};
 pub use interleaved::{CHUNK, InterleavedJob, VertexLayout, WeightSource};
 pub use job::{Scratch, SkinJob, WeightsJob};
-pub use joint_map::JointMap;
+pub use joint_map::{BindSpace, JointMap};
 pub use kernels::{Kernel, TILE};
 pub use model::{SkinNet, SkinNetModel, expanded_len};
 pub use skinning::{DualQuat, Method};

@@ -12,13 +12,14 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow, bail};
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use serde::Serialize;
 use skinfield_formats::Pose;
 use skinfield_formats::gltf_io::{Clip, GltfDocument, GltfSkin, PrimitiveInfo, load_gltf};
 use skinfield_formats::skf::{SkfView, read_skf_file, write_atomic};
 use skinfield_runtime::{
-    BoundMesh, FrameState, JointMap, Method, Palette, Scratch, SkinJob, SkinNetModel, StaticSkinJob,
+    BindSpace, BoundMesh, FrameState, JointMap, Method, Palette, Scratch, SkinJob, SkinNetModel,
+    StaticSkinJob,
 };
 
 /// Largest relative difference between the per-joint bind-space transforms of a skin and a
@@ -112,21 +113,21 @@ pub fn find_clip<'d>(doc: &'d GltfDocument, key: &str) -> anyhow::Result<&'d Cli
 fn match_model(
     doc: &GltfDocument,
     model: &SkinNetModel,
-) -> anyhow::Result<(usize, JointMap, Mat4)> {
+) -> anyhow::Result<(usize, JointMap, BindSpace)> {
     let mut reasons = Vec::new();
     for (s, skin) in doc.skins.iter().enumerate() {
         let names = skin.skeleton.names();
         let matched = JointMap::new(model.skeleton(), names).and_then(|map| {
             map.check_parents(model.skeleton(), names, skin.skeleton.parents())?;
-            let to_model = map.bind_space(
+            let space = map.bind_space(
                 model.skeleton(),
                 skin.skeleton.inverse_bind(),
                 BIND_TOLERANCE,
             )?;
-            Ok((map, to_model))
+            Ok((map, space))
         });
         match matched {
-            Ok((map, to_model)) => return Ok((s, map, to_model)),
+            Ok((map, space)) => return Ok((s, map, space)),
             Err(e) => reasons.push(format!("skin {s}: {e}")),
         }
     }
@@ -161,13 +162,8 @@ pub fn pose_frames(
     order.sort_by_key(|&(s, p)| (p.mesh, p.primitive, s));
     let driven = model.map(|m| match_model(doc, m)).transpose()?;
     let bound = match (model, &driven) {
-        (Some(m), Some((s, _, to_model))) => {
-            let positions: Vec<Vec3> = doc.skins[*s]
-                .template
-                .positions
-                .iter()
-                .map(|&p| to_model.transform_point3(p))
-                .collect();
+        (Some(m), Some((s, _, space))) => {
+            let positions = space.positions(&doc.skins[*s].template.positions);
             Some(BoundMesh::bind(m, &positions)?)
         }
         _ => None,
