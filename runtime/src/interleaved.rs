@@ -228,60 +228,10 @@ impl<W: AsRef<[f32]>> InterleavedJob<'_, W> {
             normals: self.rest_normals.map(|_| &mut n[..]),
             tangents: self.rest_tangents.map(|_| &mut t[..]),
         };
-        match &self.source {
-            WeightSource::Exact {
-                model, mesh, frame, ..
-            } => SkinJob {
-                model: *model,
-                mesh,
-                frame,
-                method: self.method,
-                first_vertex: end,
-                rest_normals: self.rest_normals,
-                rest_tangents: self.rest_tangents,
-                out_positions: outs.positions,
-                out_normals: outs.normals,
-                out_tangents: outs.tangents,
-                out_weights: None,
-            }
-            .validate(),
-            WeightSource::Fast {
-                mesh,
-                frame,
-                nodes,
-                influences,
-            } => FastSkinJob {
-                mesh,
-                frame,
-                nodes,
-                method: self.method,
-                influences: *influences,
-                first_vertex: end,
-                rest_normals: self.rest_normals,
-                rest_tangents: self.rest_tangents,
-                out_positions: outs.positions,
-                out_normals: outs.normals,
-                out_tangents: outs.tangents,
-                out_weights: None,
-            }
-            .validate(),
-            WeightSource::Static {
-                skin,
-                palette,
-                rest_positions,
-            } => StaticSkinJob {
-                skin,
-                palette,
-                method: self.method,
-                first_vertex: end,
-                rest_positions,
-                rest_normals: self.rest_normals,
-                rest_tangents: self.rest_tangents,
-                out_positions: outs.positions,
-                out_normals: outs.normals,
-                out_tangents: outs.tangents,
-            }
-            .validate(),
+        match self.packed(end, outs) {
+            Packed::Exact(job) => job.validate(),
+            Packed::Fast(job) => job.validate(),
+            Packed::Static(job) => job.validate(),
         }
     }
 
@@ -321,15 +271,33 @@ impl<W: AsRef<[f32]>> InterleavedJob<'_, W> {
     }
 
     fn skin_chunk(&mut self, first_vertex: usize, outs: Outputs<'_>) -> Result<(), RuntimeError> {
+        match self.packed(first_vertex, outs) {
+            Packed::Exact(mut job) => match &mut self.source {
+                WeightSource::Exact { scratch, .. } => job.run(scratch),
+                // `packed` makes an exact job only from an exact source.
+                _ => Err(RuntimeError::Mismatch { field: "source" }),
+            },
+            Packed::Fast(mut job) => job.run(),
+            Packed::Static(mut job) => job.run(),
+        }
+    }
+}
+
+impl<'a, W> InterleavedJob<'a, W> {
+    /// The packed job of the source over `outs.positions.len()` vertices from `first_vertex`:
+    /// the one place this job's fields become a packed job's, for validation and for each
+    /// chunk. It borrows the source's references, not `self`, so the exact path's scratch can
+    /// still be borrowed mutably to run it.
+    fn packed<'j>(&self, first_vertex: usize, outs: Outputs<'j>) -> Packed<'j, W>
+    where
+        'a: 'j,
+    {
         let (method, rest_normals, rest_tangents) =
             (self.method, self.rest_normals, self.rest_tangents);
-        match &mut self.source {
+        match &self.source {
             WeightSource::Exact {
-                model,
-                mesh,
-                frame,
-                scratch,
-            } => SkinJob {
+                model, mesh, frame, ..
+            } => Packed::Exact(SkinJob {
                 model: *model,
                 mesh,
                 frame,
@@ -341,14 +309,13 @@ impl<W: AsRef<[f32]>> InterleavedJob<'_, W> {
                 out_normals: outs.normals,
                 out_tangents: outs.tangents,
                 out_weights: None,
-            }
-            .run(scratch),
+            }),
             WeightSource::Fast {
                 mesh,
                 frame,
                 nodes,
                 influences,
-            } => FastSkinJob {
+            } => Packed::Fast(FastSkinJob {
                 mesh,
                 frame,
                 nodes,
@@ -361,13 +328,12 @@ impl<W: AsRef<[f32]>> InterleavedJob<'_, W> {
                 out_normals: outs.normals,
                 out_tangents: outs.tangents,
                 out_weights: None,
-            }
-            .run(),
+            }),
             WeightSource::Static {
                 skin,
                 palette,
                 rest_positions,
-            } => StaticSkinJob {
+            } => Packed::Static(StaticSkinJob {
                 skin,
                 palette,
                 method,
@@ -378,10 +344,16 @@ impl<W: AsRef<[f32]>> InterleavedJob<'_, W> {
                 out_positions: outs.positions,
                 out_normals: outs.normals,
                 out_tangents: outs.tangents,
-            }
-            .run(),
+            }),
         }
     }
+}
+
+/// A packed job over one chunk (or, for validation, an empty range).
+enum Packed<'j, W> {
+    Exact(SkinJob<'j, W>),
+    Fast(FastSkinJob<'j>),
+    Static(StaticSkinJob<'j>),
 }
 
 /// The packed outputs of one chunk.
