@@ -3,39 +3,16 @@
 //! engine runs it (bind the mesh, pose a frame, skin), on every held-out test frame.
 
 use glam::Vec3;
-use skinfield_formats::capture::load_capture;
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNetModel};
+use skinfield_tests::tiny_trained_model;
 use skinfield_trainer::eval::{PreparedSkinning, Skinning};
-use skinfield_trainer::synth::{SynthConfig, synthesize};
-use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
-use skinfield_trainer::train::{TrainConfig, Trainer};
 
 #[test]
 fn the_skf_row_poses_exactly_as_the_runtimes_skin_job() {
     let dir = tempfile::tempdir().unwrap();
-    synthesize(dir.path(), &SynthConfig::tiny()).unwrap();
-    let capture = load_capture(dir.path()).unwrap();
-    let initial = initial_weights(&capture).unwrap();
-    let data = train_data(&capture, &initial, &DataOptions::default()).unwrap();
-    let config = TrainConfig {
-        warm_start_iterations: 10,
-        iterations: 3,
-        batch: 2,
-        adam: skinfield_trainer::optim::AdamConfig {
-            lr: 1e-2,
-            ..Default::default()
-        },
-        ..TrainConfig::default()
-    };
-    let mut trainer = Trainer::new(data, config, false).unwrap();
-    for _ in 0..10 {
-        trainer.warm_step().unwrap();
-    }
-    for _ in 0..3 {
-        trainer.step().unwrap();
-    }
+    let (capture, model) = tiny_trained_model(dir.path(), 10, 3);
     let path = dir.path().join("model.skf");
-    std::fs::write(&path, trainer.skf_model().unwrap().to_bytes().unwrap()).unwrap();
+    std::fs::write(&path, model.to_bytes().unwrap()).unwrap();
 
     let row = PreparedSkinning::new(&capture, &Skinning::Skf(path.clone())).unwrap();
     let model = SkinNetModel::from_skf(&std::fs::read(&path).unwrap()).unwrap();

@@ -7,13 +7,10 @@
 //! message, except under `CI=true`, where it fails.
 
 use glam::Vec3;
-use skinfield_formats::capture::load_capture;
 use skinfield_formats::skf::SkfView;
 use skinfield_runtime::gpu::{GpuSkinner, SkinnedVertex, headless_device};
 use skinfield_runtime::{BoundMesh, FrameState, Method, Scratch, SkinJob, SkinNet};
-use skinfield_trainer::synth::{SynthConfig, synthesize};
-use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
-use skinfield_trainer::train::{TrainConfig, Trainer};
+use skinfield_tests::tiny_trained_model;
 
 const TOL: f32 = 1e-4;
 
@@ -33,32 +30,9 @@ fn trained_model_on_the_gpu_equals_the_cpu_path() {
     eprintln!("GPU test on {}", adapter.get_info().name);
 
     let dir = tempfile::tempdir().unwrap();
-    synthesize(dir.path(), &SynthConfig::tiny()).unwrap();
-    let capture = load_capture(dir.path()).unwrap();
-    let initial = initial_weights(&capture).unwrap();
-    let data = train_data(&capture, &initial, &DataOptions::default()).unwrap();
-    // A high learning rate so that a few iterations leave the near-uniform initialisation.
-    let config = TrainConfig {
-        warm_start_iterations: 20,
-        iterations: 5,
-        batch: 2,
-        adam: skinfield_trainer::optim::AdamConfig {
-            lr: 1e-2,
-            ..Default::default()
-        },
-        ..TrainConfig::default()
-    };
-    let (warm, image) = (config.warm_start_iterations, config.iterations);
-    let mut trainer = Trainer::new(data, config, false).unwrap();
-    for _ in 0..warm {
-        trainer.warm_step().unwrap();
-    }
-    for _ in 0..image {
-        trainer.step().unwrap();
-    }
     // Exported as `trainer train` does: with its candidate joints (CAND), which the GPU's
     // masked softmax must honour like the CPU path.
-    let model = trainer.skf_model().unwrap();
+    let (capture, model) = tiny_trained_model(dir.path(), 20, 5);
     assert!(model.candidates.is_some());
     let bytes = model.to_bytes().unwrap();
     let view = SkfView::parse(&bytes).unwrap();
