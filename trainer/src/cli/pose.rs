@@ -15,12 +15,10 @@ use anyhow::{Context as _, anyhow, bail};
 use glam::Vec3;
 use serde::Serialize;
 use skinfield_formats::Pose;
-use skinfield_formats::gltf_io::{Clip, GltfDocument, GltfSkin, PrimitiveInfo, load_gltf};
+use skinfield_formats::gltf_io::{Clip, GltfDocument, PrimitiveInfo, load_gltf};
 use skinfield_formats::skf::{SkfView, read_skf_file, write_atomic};
-use skinfield_runtime::{
-    BindSpace, BoundMesh, FrameState, JointMap, Method, Palette, Scratch, SkinJob, SkinNetModel,
-    StaticSkinJob,
-};
+use skinfield_runtime::{BindSpace, BoundMesh, FrameState, JointMap, Method, SkinNetModel};
+use skinfield_trainer::eval::posing::{pose_static, skin_frame};
 
 /// Largest relative difference between the per-joint bind-space transforms of a skin and a
 /// model that still counts as one bind pose (f32 inverse bind matrices agree to ~1e-6).
@@ -177,7 +175,13 @@ pub fn pose_frames(
                 (Some(m), Some((ms, map, _)), Some(mesh)) if *ms == s => {
                     skin_with_model(m, map, mesh, &pose, method)?
                 }
-                _ => skin_static(skin, &pose, method)?,
+                _ => pose_static(
+                    &skin.skeleton,
+                    &skin.skin,
+                    &skin.template.positions,
+                    &pose,
+                    method.into(),
+                )?,
             };
             skinned.insert(s, out);
         }
@@ -191,27 +195,6 @@ pub fn pose_frames(
     Ok(frames)
 }
 
-fn skin_static(skin: &GltfSkin, pose: &Pose, method: Method) -> anyhow::Result<Vec<Vec3>> {
-    let mut palette = Palette::new(skin.skeleton.len());
-    palette.set_pose(&skin.skeleton, pose)?;
-    let rest = &skin.template.positions;
-    let mut out = vec![Vec3::ZERO; rest.len()];
-    StaticSkinJob {
-        skin: &skin.skin,
-        palette: &palette,
-        method,
-        first_vertex: 0,
-        rest_positions: rest,
-        rest_normals: None,
-        rest_tangents: None,
-        out_positions: &mut out,
-        out_normals: None,
-        out_tangents: None,
-    }
-    .run()?;
-    Ok(out)
-}
-
 fn skin_with_model(
     model: &SkinNetModel,
     map: &JointMap,
@@ -221,20 +204,5 @@ fn skin_with_model(
 ) -> anyhow::Result<Vec<Vec3>> {
     let mut frame = FrameState::new(model);
     frame.set_engine_pose(model, map, &pose.locals)?;
-    let mut out = vec![Vec3::ZERO; mesh.vertex_count()];
-    SkinJob {
-        model,
-        mesh,
-        frame: &frame,
-        method,
-        first_vertex: 0,
-        rest_normals: None,
-        rest_tangents: None,
-        out_positions: &mut out,
-        out_normals: None,
-        out_tangents: None,
-        out_weights: None,
-    }
-    .run(&mut Scratch::new(model))?;
-    Ok(out)
+    Ok(skin_frame(model, mesh, &frame, method)?)
 }

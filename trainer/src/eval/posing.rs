@@ -23,6 +23,15 @@ pub enum Blend {
     DualQuaternion,
 }
 
+impl From<Method> for Blend {
+    fn from(m: Method) -> Self {
+        match m {
+            Method::Lbs => Blend::Linear,
+            Method::Dqs => Blend::DualQuaternion,
+        }
+    }
+}
+
 impl From<Blend> for Method {
     fn from(b: Blend) -> Self {
         match b {
@@ -124,12 +133,22 @@ pub fn pose_skinnet(
     let mesh = BoundMesh::bind(model, rest)?;
     let mut frame = FrameState::new(model);
     frame.set_pose(model, pose)?;
-    let mut out = vec![Vec3::ZERO; rest.len()];
+    skin_frame(model, &mesh, &frame, Method::Lbs)
+}
+
+/// Every vertex of a bound mesh skinned with SkinNet for a posed frame (`SkinJob`).
+pub fn skin_frame(
+    model: &SkinNetModel,
+    mesh: &BoundMesh,
+    frame: &FrameState,
+    method: Method,
+) -> Result<Vec<Vec3>, PosingError> {
+    let mut out = vec![Vec3::ZERO; mesh.vertex_count()];
     SkinJob {
         model,
-        mesh: &mesh,
-        frame: &frame,
-        method: Method::Lbs,
+        mesh,
+        frame,
+        method,
         first_vertex: 0,
         rest_normals: None,
         rest_tangents: None,
