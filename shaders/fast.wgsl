@@ -1,12 +1,16 @@
 // The fast path (runtime/src/fast, docs/experiments/fast-path.md): SkinNet runs at N nodes only (the
 // `skinnet_weights` kernel on a node mesh); these kernels turn the nodes' weights into every
-// vertex's skinning.
+// vertex's skinning. With a base (B: bind-pose weights on the vertex's strongest joints,
+// a: interpolation weights, L: the nodes' log-weight changes from the bind pose):
 //
-//   w_v = B_v + Σ_i a_vi (w_{n_i} − B_{n_i})        (B: bind-pose base weights, a: interpolation)
+//   w_vj ∝ B_vj · exp(Σ_i a_vi L_{n_i, j})     over the vertex's base joints, summing to one
 //
-// - `fast_node_residuals` (per node): residual weights w_n − B_n and matrices R_n = Σ_j r_nj M_j;
-// - `fast_skin_lbs` (per vertex): M_v = Σ_b B_vb M_{j_b} + Σ_i a_vi R_{n_i} (LBS is linear in the
-//   weights, so w_v is never formed);
+// and without one (base_count = 0) the convex combination w_v = Σ_i a_vi w_{n_i}.
+//
+// - `fast_node_residuals` (per node): L_nj = ln max(w_nj, F) − ln max(b_nj, F) with a base;
+//   without one the node weights and matrices R_n = Σ_j w_nj M_j;
+// - `fast_skin_lbs` (per vertex): M_v = Σ_b w_vb M_{j_b} (with a base), Σ_i a_vi R_{n_i}
+//   (without);
 // - `fast_skin_dqs` (per vertex): the `dqs_k` strongest joints of w_v, renormalised, DQS;
 // - `fast_top_k` (per vertex): the `top_k` strongest joints in engine layouts, weights quantised
 //   by largest remainder so they sum exactly to one.
@@ -41,11 +45,11 @@ struct Influence {
 }
 
 @group(0) @binding(13) var<uniform> fast: FastParams;
-// Dense bind-pose base weights of each node's vertex, `[node][joint]`.
+// SkinNet's exact bind-pose weights at the nodes, `[node][joint]` (zero without a base).
 @group(0) @binding(14) var<storage, read> node_base: array<f32>;
-// w_n − B_n, `[node][joint]`.
+// L_n with a base, w_n without, `[node][joint]`.
 @group(0) @binding(15) var<storage, read_write> node_residuals: array<f32>;
-// R_n per node.
+// R_n per node (without a base).
 @group(0) @binding(16) var<storage, read_write> node_mats: array<mat4x4<f32>>;
 // Per vertex: `base_count` base entries, then `neighbours` interpolation entries.
 @group(0) @binding(17) var<storage, read> vertex_influences: array<Influence>;
@@ -54,6 +58,10 @@ struct Influence {
 @group(0) @binding(19) var<storage, read_write> top_weights: array<u32>;
 
 const MAX_K: u32 = 8u;
+// `LOG_WEIGHT_FLOOR` (runtime/src/fast/job.rs).
+const LOG_WEIGHT_FLOOR: f32 = 1e-12;
+// `activation::EXP_TAIL`: below e^-72 of the strongest a weight is exactly zero.
+const EXP_TAIL: f32 = 72.0;
 
 @compute @workgroup_size(64)
 fn fast_node_residuals(
@@ -66,17 +74,61 @@ fn fast_node_residuals(
         return;
     }
     let j_count = fast.joint_count;
+    if fast.base_count > 0u {
+        for (var j = 0u; j < j_count; j++) {
+            let i = n * j_count + j;
+            node_residuals[i] = log(max(skin_weights[i], LOG_WEIGHT_FLOOR))
+                - log(max(node_base[i], LOG_WEIGHT_FLOOR));
+        }
+        return;
+    }
     var m = mat4x4<f32>(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
     for (var j = 0u; j < j_count; j++) {
-        let r = skin_weights[n * j_count + j] - node_base[n * j_count + j];
-        node_residuals[n * j_count + j] = r;
-        m += joint_mats[j] * r;
+        let w = skin_weights[n * j_count + j];
+        node_residuals[n * j_count + j] = w;
+        m += joint_mats[j] * w;
     }
     node_mats[n] = m;
 }
 
 fn vertex_stride() -> u32 {
     return fast.base_count + fast.neighbours;
+}
+
+struct Base {
+    index: array<u32, 8>,
+    weight: array<f32, 8>,
+}
+
+// The weights of vertex `v` on its base joints (base order; requires a base):
+// B_vb · exp(Σ_i a_vi L_{n_i, j_b}), renormalised (as `FastFrame::base_weights` on the CPU).
+fn base_weights(v: u32) -> Base {
+    var out: Base;
+    let first = v * vertex_stride();
+    let j_count = fast.joint_count;
+    var t: array<f32, 8>;
+    var top = -3.0e38;
+    for (var b = 0u; b < fast.base_count; b++) {
+        let e = vertex_influences[first + b];
+        out.index[b] = e.index;
+        var change = 0.0;
+        for (var i = 0u; i < fast.neighbours; i++) {
+            let a = vertex_influences[first + fast.base_count + i];
+            change += a.weight * node_residuals[a.index * j_count + e.index];
+        }
+        // An empty slot (weight 0) stays empty.
+        t[b] = select(-3.0e38, log(e.weight) + change, e.weight > 0.0);
+        top = max(top, t[b]);
+    }
+    var sum = 0.0;
+    for (var b = 0u; b < fast.base_count; b++) {
+        out.weight[b] = select(0.0, exp(t[b] - top), t[b] - top >= -EXP_TAIL);
+        sum += out.weight[b];
+    }
+    for (var b = 0u; b < fast.base_count; b++) {
+        out.weight[b] /= sum;
+    }
+    return out;
 }
 
 @compute @workgroup_size(64)
@@ -89,32 +141,37 @@ fn fast_skin_lbs(
     if v >= fast.vertex_count {
         return;
     }
-    let first = v * vertex_stride();
     var m = mat4x4<f32>(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
-    for (var b = 0u; b < fast.base_count; b++) {
-        let e = vertex_influences[first + b];
-        m += joint_mats[e.index] * e.weight;
-    }
-    for (var i = 0u; i < fast.neighbours; i++) {
-        let e = vertex_influences[first + fast.base_count + i];
-        m += node_mats[e.index] * e.weight;
+    if fast.base_count > 0u {
+        let w = base_weights(v);
+        for (var b = 0u; b < fast.base_count; b++) {
+            m += joint_mats[w.index[b]] * w.weight[b];
+        }
+    } else {
+        let first = v * vertex_stride();
+        for (var i = 0u; i < fast.neighbours; i++) {
+            let e = vertex_influences[first + i];
+            m += node_mats[e.index] * e.weight;
+        }
     }
     skinned[v] = lbs_vertex(m, v);
 }
 
-// Weight of joint `j` in w_v.
-fn dense_weight(v: u32, j: u32) -> f32 {
-    let first = v * vertex_stride();
+// Weight of joint `j` in w_v (`base`: `base_weights(v)` when there is a base).
+fn dense_weight(v: u32, j: u32, base: Base) -> f32 {
     var w = 0.0;
-    for (var b = 0u; b < fast.base_count; b++) {
-        let e = vertex_influences[first + b];
-        if e.index == j {
-            w += e.weight;
+    if fast.base_count > 0u {
+        for (var b = 0u; b < fast.base_count; b++) {
+            if base.index[b] == j {
+                w += base.weight[b];
+            }
         }
+        return w;
     }
+    let first = v * vertex_stride();
     let j_count = fast.joint_count;
     for (var i = 0u; i < fast.neighbours; i++) {
-        let e = vertex_influences[first + fast.base_count + i];
+        let e = vertex_influences[first + i];
         w += e.weight * node_residuals[e.index * j_count + j];
     }
     return w;
@@ -130,8 +187,12 @@ struct Top {
 fn strongest(v: u32, k: u32) -> Top {
     var top: Top;
     var len = 0u;
+    var base: Base;
+    if fast.base_count > 0u {
+        base = base_weights(v);
+    }
     for (var j = 0u; j < fast.joint_count; j++) {
-        let w = dense_weight(v, j);
+        let w = dense_weight(v, j, base);
         if len == k && w <= top.weight[k - 1u] {
             continue;
         }

@@ -6,10 +6,10 @@ mod common;
 
 use glam::{Vec3, Vec4};
 use skinfield_formats::{Pose, StaticSkin};
-use skinfield_runtime::fast::{Interpolation, MAX_INFLUENCES, NodeMetric, strongest_influences};
+use skinfield_runtime::fast::{Interpolation, LOG_WEIGHT_FLOOR, MAX_INFLUENCES, NodeMetric};
 use skinfield_runtime::{
-    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Influence, Method,
-    RuntimeError, Scratch, SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob, TopKWeights,
+    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, RuntimeError,
+    Scratch, SkinJob, SkinNetModel, StaticSkinJob, TopKIndices, TopKJob, TopKWeights,
 };
 
 struct Fixture {
@@ -148,11 +148,31 @@ fn max_dist(a: &[Vec3], b: &[Vec3]) -> f32 {
         .fold(0.0, f32::max)
 }
 
+/// The `keep` strongest joints of `w` (ties: lower joint), renormalised, as a dense row.
+fn restricted(w: &[f32], keep: usize) -> Vec<f32> {
+    let mut order: Vec<usize> = (0..w.len()).collect();
+    order.sort_by(|&a, &b| w[b].total_cmp(&w[a]).then(a.cmp(&b)));
+    let mut out = vec![0.0f32; w.len()];
+    let s: f32 = order[..keep].iter().map(|&i| w[i]).sum();
+    for &i in &order[..keep] {
+        out[i] = w[i] / s;
+    }
+    out
+}
+
 #[test]
 fn one_node_per_vertex_reproduces_the_exact_path() {
     // Every welded vertex a node and one neighbour: each vertex reads its own node, so the
-    // fast path must give the exact path's weights and skinned vertices (any base).
+    // fast path must give the exact path's weights and skinned vertices when the base holds
+    // every joint (or there is none), and the exact weights restricted to the vertex's
+    // bind-pose base joints otherwise (B_vj · w_vj / b_vj ∝ w_vj on them).
     let f = fixture(6, 1);
+    let j = f.model.joint_count();
+    let exact = run_exact(&f, Method::Lbs);
+    let mut bind_w = vec![0.0; f.positions.len() * j];
+    f.model
+        .weights_for(&f.positions, &f.model.skeleton().bind_pose(), &mut bind_w)
+        .unwrap();
     for base in [0, 3, 8] {
         let options = FastOptions {
             nodes: f.positions.len(),
@@ -164,16 +184,31 @@ fn one_node_per_vertex_reproduces_the_exact_path() {
         assert_eq!(mesh.node_count(), mesh.stats().welded_vertices);
         assert!(mesh.node_count() < f.positions.len(), "the seam is welded");
         let fast = run_fast(&f, &mesh, &nodes, Method::Lbs, 4, 0..f.positions.len());
-        let exact = run_exact(&f, Method::Lbs);
-        let dw = fast
-            .w
-            .iter()
-            .zip(&exact.w)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f32::max);
-        assert!(dw < 1e-6, "base {base}: weights differ by {dw}");
-        assert!(max_dist(&fast.p, &exact.p) < 1e-5, "base {base}");
-        assert!(max_dist(&fast.n, &exact.n) < 1e-4, "base {base}");
+        let mut dw = 0.0f32;
+        for v in 0..f.positions.len() {
+            let exact_w = &exact.w[v * j..(v + 1) * j];
+            let want = if base == 3 {
+                // The base joints are the bind pose's strongest; keep the exact weights there.
+                let keep = restricted(&bind_w[v * j..(v + 1) * j], 3);
+                let w: Vec<f32> = exact_w
+                    .iter()
+                    .zip(&keep)
+                    .map(|(e, k)| if *k > 0.0 { *e } else { 0.0 })
+                    .collect();
+                let s: f32 = w.iter().sum();
+                w.iter().map(|x| x / s).collect()
+            } else {
+                exact_w.to_vec()
+            };
+            for (a, b) in fast.w[v * j..(v + 1) * j].iter().zip(&want) {
+                dw = dw.max((a - b).abs());
+            }
+        }
+        assert!(dw < 1e-5, "base {base}: weights differ by {dw}");
+        if base != 3 {
+            assert!(max_dist(&fast.p, &exact.p) < 1e-5, "base {base}");
+            assert!(max_dist(&fast.n, &exact.n) < 1e-4, "base {base}");
+        }
     }
 }
 
@@ -187,6 +222,11 @@ fn interpolated_weights_follow_the_documented_formula_and_lbs_is_their_exact_ble
             ..FastOptions::DEFAULT
         },
         FastOptions {
+            nodes: 30,
+            base_influences: 3,
+            ..FastOptions::DEFAULT
+        },
+        FastOptions {
             nodes: 25,
             neighbours: 3,
             base_influences: 0,
@@ -195,7 +235,8 @@ fn interpolated_weights_follow_the_documented_formula_and_lbs_is_their_exact_ble
         },
     ] {
         let (mesh, nodes) = bind(&f, &options);
-        // Independent of the fast frame: SkinNet at the node positions, straight from the model.
+        // Independent of the fast frame: SkinNet at the node positions, straight from the model,
+        // in the frame's pose and in the bind pose.
         let node_pos: Vec<Vec3> = mesh
             .node_vertices()
             .iter()
@@ -203,45 +244,57 @@ fn interpolated_weights_follow_the_documented_formula_and_lbs_is_their_exact_ble
             .collect();
         let mut wn = vec![0.0; node_pos.len() * j];
         f.model.weights_for(&node_pos, &f.pose, &mut wn).unwrap();
+        let bind_pose = f.model.skeleton().bind_pose();
+        let mut bn = vec![0.0; node_pos.len() * j];
+        f.model.weights_for(&node_pos, &bind_pose, &mut bn).unwrap();
         // And SkinNet at every vertex in the bind pose, cut to the base influences.
         let mut bind_w = vec![0.0; f.positions.len() * j];
         f.model
-            .weights_for(&f.positions, &f.model.skeleton().bind_pose(), &mut bind_w)
+            .weights_for(&f.positions, &bind_pose, &mut bind_w)
             .unwrap();
         let kb = options.base_influences;
-        let base_dense = |v: usize| {
-            let mut b = vec![0.0f32; j];
-            let mut top = vec![Influence::default(); kb];
-            strongest_influences(&bind_w[v * j..(v + 1) * j], &mut top);
-            for t in &top {
-                b[t.index as usize] += t.weight;
-            }
-            b
-        };
         let fast = run_fast(&f, &mesh, &nodes, Method::Lbs, 4, 0..f.positions.len());
         let k = options.neighbours;
+        let ln = |x: f32| f64::from(x.max(LOG_WEIGHT_FLOOR)).ln();
         for v in 0..f.positions.len() {
-            let mut want = base_dense(v);
-            for a in &mesh.interpolation()[v * k..(v + 1) * k] {
-                let n = a.index as usize;
-                let bn = base_dense(mesh.node_vertices()[n] as usize);
-                for jj in 0..j {
-                    want[jj] += a.weight * (wn[n * j + jj] - bn[jj]);
+            let interp = &mesh.interpolation()[v * k..(v + 1) * k];
+            let want: Vec<f32> = if kb == 0 {
+                let mut w = vec![0.0f32; j];
+                for a in interp {
+                    let n = a.index as usize;
+                    for jj in 0..j {
+                        w[jj] += a.weight * wn[n * j + jj];
+                    }
                 }
-            }
+                w
+            } else {
+                let base = restricted(&bind_w[v * j..(v + 1) * j], kb);
+                let w: Vec<f64> = (0..j)
+                    .map(|jj| {
+                        let change: f64 = interp
+                            .iter()
+                            .map(|a| {
+                                let n = a.index as usize;
+                                f64::from(a.weight) * (ln(wn[n * j + jj]) - ln(bn[n * j + jj]))
+                            })
+                            .sum();
+                        f64::from(base[jj]) * change.exp()
+                    })
+                    .collect();
+                let s: f64 = w.iter().sum();
+                w.iter().map(|x| (x / s) as f32).collect()
+            };
             let got = &fast.w[v * j..(v + 1) * j];
             for (g, w) in got.iter().zip(&want) {
                 assert!((g - w).abs() < 1e-5, "vertex {v}: {got:?} vs {want:?}");
+                assert!(*g >= 0.0, "vertex {v}: negative weight");
             }
             assert!((got.iter().sum::<f32>() - 1.0).abs() < 1e-5);
-            let s: f32 = mesh.interpolation()[v * k..(v + 1) * k]
-                .iter()
-                .map(|a| a.weight)
-                .sum();
+            assert!(got.iter().filter(|&&x| x > 0.0).count() <= kb.max(j));
+            let s: f32 = interp.iter().map(|a| a.weight).sum();
             assert!((s - 1.0).abs() < 1e-6);
         }
-        // LBS through the node residual matrices = LBS of the interpolated weights (which may
-        // dip slightly below zero, so not through `StaticSkin`).
+        // LBS through base joints or node matrices = LBS of the interpolated weights.
         let mats = f.frame.palette().matrices();
         let want: Vec<Vec3> = f
             .positions

@@ -1,18 +1,18 @@
 //! Lab probe for the runtime's fast path (issue 18): where and why it deviates from the exact
-//! path on a trained model, and how two alternative weight interpolations would do.
+//! path on a trained model, and how the additive weight interpolation it replaced did.
 //!
 //! ```text
-//! cargo run -p skinfield-trainer --example fast_path_probe -- CAPTURE_DIR MODEL.skf [none|clamp|log]
+//! cargo run -p skinfield-trainer --example fast_path_probe -- CAPTURE_DIR MODEL.skf [log|additive|clamp]
 //! ```
 //!
 //! For every test frame it skins the capture's template with the exact path and with the fast
 //! path (default options, LBS), and prints the mean vertex deviation, how many vertex-frames
-//! have a negative interpolated weight, and the worst vertices. `clamp` re-skins the vertices
-//! with negative weights after clamping them to zero and renormalising; `log` replaces the
-//! fast path's additive interpolation `B_v + Σ a_vi (w_n(θ) − B_n)` by interpolating the
-//! nodes' log-weight changes, `w_v ∝ B_v ⊙ exp(Σ a_vi (ln w_n(θ) − ln B_n))` (equivalently the
-//! logit changes, since a softmax's log-normaliser cancels), which is non-negative by
-//! construction. Both variants use the exact weights at the nodes, as the fast path does.
+//! have a negative interpolated weight, and the worst vertices. `log` (the default) is the
+//! shipped fast path, which interpolates the nodes' log-weight changes,
+//! `w_v ∝ B_v ⊙ exp(Σ a_vi (ln w_n(θ) − ln w_n(bind)))`. `additive` re-skins every vertex with
+//! the form it replaced, `B_v + Σ a_vi (w_n(θ) − B_n)` (`B`: the 8 strongest bind-pose joints,
+//! renormalised), and `clamp` does the same with negative weights clamped to zero and
+//! renormalised. All variants use the exact weights at the nodes, as the fast path does.
 use skinfield_formats::capture::load_capture;
 use skinfield_runtime::*;
 
@@ -22,7 +22,7 @@ fn main() {
     let model = SkinNetModel::from_skf(&std::fs::read(&args[1]).unwrap()).unwrap();
     let mode = args.get(2).cloned().unwrap_or_default();
     let clamp = mode == "clamp";
-    let logspace = mode == "log";
+    let additive = clamp || mode == "additive";
     let t = &capture.template;
     let n = t.positions.len();
     let j = model.joint_count();
@@ -35,20 +35,6 @@ fn main() {
     let mut we = vec![0.0f32; n * j];
     let mut wf = vec![0.0f32; n * j];
     let mut all = Vec::new();
-    // Exact bind-pose weights of every vertex (the log-space variant's base).
-    let mut wb = vec![0.0f32; n * j];
-    frame
-        .set_pose(&model, &model.skeleton().bind_pose())
-        .unwrap();
-    WeightsJob {
-        model: &model,
-        mesh: &mesh,
-        frame: &frame,
-        first_vertex: 0,
-        out_weights: &mut wb,
-    }
-    .run(&mut scratch)
-    .unwrap();
     let k = fast.options().neighbours;
     let interp = fast.interpolation().to_vec();
     let node_v = fast.node_vertices().to_vec();
@@ -87,40 +73,33 @@ fn main() {
         }
         .run()
         .unwrap();
-        if clamp {
-            // Clamp negatives, renormalise, re-skin with LBS of the clamped weights.
+        if additive {
+            // The replaced form, from the mesh's own base and the nodes' exact weights.
             let mats = frame.palette().matrices();
+            let base = fast.base();
+            let kb = fast.options().base_influences;
+            let wn = nodes.node_weights();
             for v in 0..n {
                 let w = &mut wf[v * j..(v + 1) * j];
-                if w.iter().any(|&x| x < 0.0) {
+                w.fill(0.0);
+                for b in &base[v * kb..(v + 1) * kb] {
+                    w[b.index as usize] += b.weight;
+                }
+                for e in &interp[v * k..(v + 1) * k] {
+                    let node = e.index as usize;
+                    let nv = node_v[node] as usize;
+                    for (jj, x) in w.iter_mut().enumerate() {
+                        *x += e.weight * wn[node * j + jj];
+                    }
+                    for b in &base[nv * kb..(nv + 1) * kb] {
+                        w[b.index as usize] -= e.weight * b.weight;
+                    }
+                }
+                if clamp && w.iter().any(|&x| x < 0.0) {
                     w.iter_mut().for_each(|x| *x = x.max(0.0));
                     let s: f32 = w.iter().sum();
                     w.iter_mut().for_each(|x| *x /= s);
-                    let m = (0..j).fold(Mat4::ZERO, |a, k| a + mats[k] * w[k]);
-                    pf[v] = m.transform_point3(t.positions[v]);
                 }
-            }
-        }
-        if logspace {
-            let mats = frame.palette().matrices();
-            for v in 0..n {
-                let mut acc = vec![0.0f64; j];
-                for e in &interp[v * k..(v + 1) * k] {
-                    let nv = node_v[e.index as usize] as usize;
-                    for jj in 0..j {
-                        let (b, w) = (wb[nv * j + jj], we[nv * j + jj]);
-                        if b > 1e-12 && w > 1e-12 {
-                            acc[jj] +=
-                                f64::from(e.weight) * (f64::from(w).ln() - f64::from(b).ln());
-                        }
-                    }
-                }
-                let w = &mut wf[v * j..(v + 1) * j];
-                for jj in 0..j {
-                    w[jj] = (f64::from(wb[v * j + jj]) * acc[jj].exp()) as f32;
-                }
-                let s: f32 = w.iter().sum();
-                w.iter_mut().for_each(|x| *x /= s);
                 let m = (0..j).fold(Mat4::ZERO, |a, q| a + mats[q] * w[q]);
                 pf[v] = m.transform_point3(t.positions[v]);
             }

@@ -10,6 +10,7 @@ use skinfield_formats::MAX_JOINTS;
 use super::mesh::FastMesh;
 use super::topk::strongest_influences;
 use super::{Influence, MAX_INFLUENCES};
+use crate::activation::EXP_TAIL;
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, VertexOutputs, WeightsJob};
@@ -17,21 +18,28 @@ use crate::kernels::blend;
 use crate::model::SkinNet;
 use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
 
-/// Residual weights smaller than this are exactly zero (2⁻¹⁰⁰ ≈ 7.9e-31).
+/// Node weights are floored here before their logarithm: a joint the node gives (almost) no
+/// weight in the bind pose and in the frame keeps a change of zero instead of the ratio of two
+/// rounding errors, and a weight that vanishes in the frame switches the joint off
+/// (`ln 1e-12 ≈ −27.6`) without an infinity.
+pub const LOG_WEIGHT_FLOOR: f32 = 1e-12;
+
+/// Convex-mode node weights smaller than this are exactly zero (2⁻¹⁰⁰ ≈ 7.9e-31).
 const RESIDUAL_FLUSH: f32 = 7.888_609e-31;
 
-/// The nodes' state for one frame: SkinNet's weights at the nodes, their change from the
-/// bind-pose base, and the residual skinning matrix of every node. Buffers are allocated once
-/// by [`FastFrame::new`]; [`FastFrame::update`] never allocates.
+/// The nodes' state for one frame: SkinNet's weights at the nodes and what the vertices
+/// interpolate from them (log-weight changes, or blended node matrices when there is no base).
+/// Buffers are allocated once by [`FastFrame::new`]; [`FastFrame::update`] never allocates.
 #[derive(Clone, Debug)]
 pub struct FastFrame {
     mesh_id: u64,
     joints: usize,
     /// `N × J`: SkinNet's weights at the nodes.
     node_weights: Vec<f32>,
-    /// `N × J`: `w_n − B_n`.
-    residuals: Vec<f32>,
-    /// `N`: `R_n = Σ_j (w_nj − B_nj) M_j`.
+    /// `N × J`: `ln w_n(θ) − ln w_n(bind)` (both floored at [`LOG_WEIGHT_FLOOR`]); zero
+    /// without a base.
+    log_changes: Vec<f32>,
+    /// `N`: `Σ_j w_nj M_j` without a base; zero with one.
     node_matrices: Vec<Mat4>,
     /// The pose (`FrameState` generation) it was computed for; 0 = none.
     pose: u64,
@@ -46,14 +54,15 @@ impl FastFrame {
             mesh_id: mesh.id(),
             joints: j,
             node_weights: vec![0.0; n * j],
-            residuals: vec![0.0; n * j],
+            log_changes: vec![0.0; n * j],
             node_matrices: vec![Mat4::ZERO; n],
             pose: 0,
         }
     }
 
-    /// SkinNet at the nodes for `frame`'s pose, then the residual weights and matrices. The
-    /// only per-frame MLP work of the fast path: `N` vertices, whatever the mesh size.
+    /// SkinNet at the nodes for `frame`'s pose, then the nodes' log-weight changes (or, without
+    /// a base, their blended matrices). The only per-frame MLP work of the fast path: `N`
+    /// vertices, whatever the mesh size.
     pub fn update<W: AsRef<[f32]>>(
         &mut self,
         model: &SkinNet<W>,
@@ -76,34 +85,26 @@ impl FastFrame {
             out_weights: &mut self.node_weights,
         }
         .run(scratch)?;
-        let j = self.joints;
-        let mats = frame.palette().matrices();
-        let kernel = mesh.kernel();
-        for (n, (&v, (w, r))) in mesh
-            .node_vertices()
-            .iter()
-            .zip(
-                self.node_weights
-                    .chunks_exact(j)
-                    .zip(self.residuals.chunks_exact_mut(j)),
-            )
-            .enumerate()
-        {
-            r.copy_from_slice(w);
-            for b in mesh.base_of(v as usize) {
-                r[b.index as usize] -= b.weight;
+        if mesh.options().base_influences > 0 {
+            let rows = self.node_weights.iter().zip(mesh.node_bind_weights());
+            for (l, (&w, &b)) in self.log_changes.iter_mut().zip(rows) {
+                *l = log_floored(w) - log_floored(b);
             }
-            // Residuals below 2⁻¹⁰⁰ are zero: their products would be subnormal floats, which
-            // cost a microcode assist per use on Intel cores (see `activation::EXP_TAIL`).
-            for x in r.iter_mut() {
-                if x.abs() < RESIDUAL_FLUSH {
-                    *x = 0.0;
-                }
+        } else {
+            let mats = frame.palette().matrices();
+            let kernel = mesh.kernel();
+            let rows = self.node_weights.chunks_exact(self.joints);
+            for (m, w) in self.node_matrices.iter_mut().zip(rows) {
+                // Weights below 2⁻¹⁰⁰ are zero: their products would be subnormal floats,
+                // which cost a microcode assist per use on Intel cores (see
+                // `activation::EXP_TAIL`).
+                let nonzero = w
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, x)| x.abs() >= RESIDUAL_FLUSH);
+                *m = Mat4::ZERO;
+                blend(kernel, m, mats, nonzero.map(|(j, &x)| (j, x)));
             }
-            let mut m = Mat4::ZERO;
-            let nonzero = r.iter().enumerate().filter(|(_, x)| **x != 0.0);
-            blend(kernel, &mut m, mats, nonzero.map(|(j, &x)| (j, x)));
-            self.node_matrices[n] = m;
         }
         self.pose = frame.generation();
         Ok(())
@@ -115,13 +116,14 @@ impl FastFrame {
         &self.node_weights
     }
 
-    /// The nodes' residual weights `w_n − B_n`, `J` per node.
+    /// The nodes' log-weight changes from the bind pose, `J` per node (zero without a base).
     #[must_use]
-    pub fn residuals(&self) -> &[f32] {
-        &self.residuals
+    pub fn log_changes(&self) -> &[f32] {
+        &self.log_changes
     }
 
-    /// The nodes' residual skinning matrices `R_n = Σ_j (w_nj − B_nj) M_j`.
+    /// The nodes' blended skinning matrices `Σ_j w_nj M_j` (used, and non-zero, only without a
+    /// base).
     #[must_use]
     pub fn node_matrices(&self) -> &[Mat4] {
         &self.node_matrices
@@ -150,21 +152,75 @@ impl FastFrame {
         Ok(())
     }
 
-    /// The interpolated weights `B_v + Σ_i a_vi (w_{n_i} − B_{n_i})` of vertex `v` into `out`
-    /// (`J` floats).
+    /// The weights of vertex `v` on its base joints (base order; requires a base), the
+    /// interpolated log-weight changes applied to its bind-pose base and renormalised:
+    /// `w_vb ∝ B_vb · exp(Σ_i a_vi · L_{n_i, j_b})`. Returns the entries written.
+    pub(crate) fn base_weights(
+        &self,
+        mesh: &FastMesh,
+        v: usize,
+        out: &mut [Influence; MAX_INFLUENCES],
+    ) -> usize {
+        let j = self.joints;
+        let (base, base_log) = (mesh.base_of(v), mesh.base_log_of(v));
+        let interp = mesh.interp_of(v);
+        let mut t = [f32::NEG_INFINITY; MAX_INFLUENCES];
+        let mut top = f32::NEG_INFINITY;
+        for ((tb, b), &lb) in t.iter_mut().zip(base).zip(base_log) {
+            let joint = b.index as usize;
+            let change: f32 = interp
+                .iter()
+                .map(|a| a.weight * self.log_changes[a.index as usize * j + joint])
+                .sum();
+            *tb = lb + change;
+            top = top.max(*tb);
+        }
+        // The softmax's tail rule: below e^-72 of the strongest is exactly zero (no subnormal
+        // floats reach the matrix blends).
+        let mut sum = 0.0;
+        for ((o, b), &tb) in out.iter_mut().zip(base).zip(&t) {
+            let w = if tb - top >= -EXP_TAIL {
+                libm::expf(tb - top)
+            } else {
+                0.0
+            };
+            *o = Influence {
+                index: b.index,
+                weight: w,
+            };
+            sum += w;
+        }
+        let inv = 1.0 / sum;
+        for o in &mut out[..base.len()] {
+            o.weight *= inv;
+        }
+        base.len()
+    }
+
+    /// The fast path's weights of vertex `v` into `out` (`J` floats, dense).
     pub(crate) fn dense_weights(&self, mesh: &FastMesh, v: usize, out: &mut [f32]) {
         let j = self.joints;
         out.fill(0.0);
-        for b in mesh.base_of(v) {
-            out[b.index as usize] += b.weight;
-        }
-        for a in mesh.interp_of(v) {
-            let n = a.index as usize;
-            for (o, r) in out.iter_mut().zip(&self.residuals[n * j..(n + 1) * j]) {
-                *o += a.weight * r;
+        if mesh.options().base_influences > 0 {
+            let mut entries = [Influence::default(); MAX_INFLUENCES];
+            let len = self.base_weights(mesh, v, &mut entries);
+            for e in &entries[..len] {
+                out[e.index as usize] += e.weight;
+            }
+        } else {
+            for a in mesh.interp_of(v) {
+                let n = a.index as usize;
+                for (o, w) in out.iter_mut().zip(&self.node_weights[n * j..(n + 1) * j]) {
+                    *o += a.weight * w;
+                }
             }
         }
     }
+}
+
+/// `ln max(w, LOG_WEIGHT_FLOOR)`.
+fn log_floored(w: f32) -> f32 {
+    libm::logf(w.max(LOG_WEIGHT_FLOOR))
 }
 
 /// Checks the range of a fast-path job against the mesh.
@@ -188,8 +244,9 @@ pub struct FastSkinJob<'a> {
     pub frame: &'a FrameState,
     /// The nodes, updated for `frame`'s pose.
     pub nodes: &'a FastFrame,
-    /// LBS (exact blend of the interpolated weights, `base_influences + neighbours` matrices
-    /// per vertex) or DQS (over the `influences` strongest joints).
+    /// LBS (exact blend of the interpolated weights: `base_influences` matrices per vertex, or
+    /// `neighbours` node matrices without a base) or DQS (over the `influences` strongest
+    /// joints).
     pub method: Method,
     /// Joints kept per vertex by DQS, 1..=[`MAX_INFLUENCES`] (renormalised); LBS ignores it.
     pub influences: usize,
@@ -247,27 +304,34 @@ impl FastSkinJob<'_> {
         let strongest = &mut strongest[..self.influences];
         let kernel = mesh.kernel();
         let node_mats = nodes.node_matrices();
+        let with_base = mesh.options().base_influences > 0;
+        let mut entries = [Influence::default(); MAX_INFLUENCES];
         for i in 0..self.out_positions.len() {
             let v = self.first_vertex + i;
             match self.method {
                 Method::Lbs => {
-                    // LBS is linear in the weights: the base joints' matrices plus the nodes'
-                    // residual matrices give Σ_j w_vj M_j without forming w_v.
+                    // With a base, w_v lives on the base joints: `base_influences` blends.
+                    // Without one, LBS is linear in the convex node weights: the nodes'
+                    // blended matrices give Σ_j w_vj M_j in `neighbours` blends.
                     let mut m = Mat4::ZERO;
-                    let base = mesh.base_of(v).iter();
-                    blend(
-                        kernel,
-                        &mut m,
-                        mats,
-                        base.map(|b| (b.index as usize, b.weight)),
-                    );
-                    let interp = mesh.interp_of(v).iter();
-                    blend(
-                        kernel,
-                        &mut m,
-                        node_mats,
-                        interp.map(|a| (a.index as usize, a.weight)),
-                    );
+                    if with_base {
+                        let len = nodes.base_weights(mesh, v, &mut entries);
+                        let base = entries[..len].iter();
+                        blend(
+                            kernel,
+                            &mut m,
+                            mats,
+                            base.map(|b| (b.index as usize, b.weight)),
+                        );
+                    } else {
+                        let interp = mesh.interp_of(v).iter();
+                        blend(
+                            kernel,
+                            &mut m,
+                            node_mats,
+                            interp.map(|a| (a.index as usize, a.weight)),
+                        );
+                    }
                     self.out_positions[i] = m.transform_point3(rest[v]);
                     if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals)
                     {

@@ -52,6 +52,12 @@ pub struct FastMesh {
     interp: Vec<Influence>,
     /// `vertices × base_influences`: joint and bind-pose weight.
     base: Vec<Influence>,
+    /// `vertices × base_influences`: `ln` of each base weight (−∞ for an empty slot), so a frame
+    /// costs one `exp` per base joint and no `ln`.
+    base_log: Vec<f32>,
+    /// `nodes × J`: SkinNet's exact (dense) bind-pose weights at the nodes, the reference of
+    /// the nodes' log-weight changes.
+    node_bind: Vec<f32>,
     stats: BindStats,
 }
 
@@ -256,8 +262,29 @@ impl FastMesh {
             out.copy_from_slice(&welded_interp[w * k..(w + 1) * k]);
         }
         let base = bind_pose_base(model, positions, options.base_influences)?;
+        let base_log = base
+            .iter()
+            .map(|b| {
+                if b.weight > 0.0 {
+                    libm::logf(b.weight)
+                } else {
+                    f32::NEG_INFINITY
+                }
+            })
+            .collect();
         let node_vertices: Vec<u32> = nodes.iter().map(|&w| graph.first[w as usize]).collect();
         let node_mesh = BoundMesh::bind(model, &node_positions)?;
+        let mut node_bind = vec![0.0; node_positions.len() * j];
+        let mut frame = FrameState::new(model);
+        frame.set_pose(model, &model.skeleton().bind_pose())?;
+        WeightsJob {
+            model,
+            mesh: &node_mesh,
+            frame: &frame,
+            first_vertex: 0,
+            out_weights: &mut node_bind,
+        }
+        .run(&mut Scratch::new(model))?;
         Ok(Self {
             model_id: model.id(),
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
@@ -272,6 +299,8 @@ impl FastMesh {
             node_mesh,
             interp,
             base,
+            base_log,
+            node_bind,
             stats: BindStats {
                 welded_vertices: graph.len(),
                 euclidean_fallback_vertices: fallback,
@@ -333,10 +362,22 @@ impl FastMesh {
         self.stats
     }
 
+    /// SkinNet's exact bind-pose weights at the nodes, `J` per node (node order).
+    #[must_use]
+    pub fn node_bind_weights(&self) -> &[f32] {
+        &self.node_bind
+    }
+
     /// The base entries of vertex `v`.
     pub(crate) fn base_of(&self, v: usize) -> &[Influence] {
         let kb = self.options.base_influences;
         &self.base[v * kb..(v + 1) * kb]
+    }
+
+    /// `ln` of the base weights of vertex `v` (−∞ for an empty slot).
+    pub(crate) fn base_log_of(&self, v: usize) -> &[f32] {
+        let kb = self.options.base_influences;
+        &self.base_log[v * kb..(v + 1) * kb]
     }
 
     /// The interpolation entries of vertex `v`.

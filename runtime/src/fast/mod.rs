@@ -10,19 +10,26 @@
 //!   mesh* (so a skirt never borrows from the leg it touches, an arm never from the torso) and
 //!   convex weights `a_vi` from their distances.
 //!
-//! Per frame ([`FastFrame::update`]) SkinNet runs at the `N` nodes only, and each vertex gets
+//! Per frame ([`FastFrame::update`]) SkinNet runs at the `N` nodes only; each node's change
+//! of log-weight from the bind pose, `L_nj = ln w_nj(θ) − ln w_nj(bind)` (both floored at
+//! [`LOG_WEIGHT_FLOOR`]), is interpolated to the vertices and applied to their exact base:
 //!
 //! ```text
-//! w_v(θ) = B_v + Σ_i a_vi · (w_{n_i}(θ) − B_{n_i})
+//! w_vj(θ) ∝ B_vj · exp(Σ_i a_vi · L_{n_i, j})      over the vertex's base joints, summing to one
 //! ```
 //!
-//! the exact spatial detail of the bind pose plus the interpolated pose-dependent change (both
-//! terms sum to one, so `w_v` does). Because LBS is linear in the weights, [`FastSkinJob`] never
-//! forms `w_v`: it blends the vertex's base joints' matrices with per-node residual matrices
-//! `R_n = Σ_j (w_nj − B_nj) M_j` computed once per frame, so a vertex costs
-//! `base_influences + neighbours` matrix blends whatever the joint count. DQS, which is not
-//! linear, forms `w_v` and keeps its [`FastSkinJob::influences`] strongest joints.
-//! [`TopKJob`] writes the `K` strongest joints per vertex in engine layouts (u8/u16 indices,
+//! The exact spatial detail of the bind pose times the interpolated pose-dependent change. As a
+//! softmax's log-normaliser is common to all joints of a point and cancels on renormalising, this
+//! interpolates SkinNet's *logit* changes, which are smooth over the surface; the weights are
+//! positive by construction. (The additive form `B_v + Σ a_vi (w_n − B_n)` this replaced carried
+//! a node's shift of weight between two joints to vertices with little weight on the joint losing
+//! it, and gave a third of the vertex-frames of a trained model a negative weight, up to −0.12,
+//! which LBS turned into a 9.5 cm error; `docs/experiments/fast-path.md`.) A vertex costs
+//! `neighbours × base_influences` multiply-adds, `base_influences` exponentials and as many matrix
+//! blends, whatever the joint count. With `base_influences = 0` the vertex takes the convex
+//! combination `Σ_i a_vi w_{n_i}(θ)` of its nodes' weights instead (blended as per-node matrices
+//! for LBS). DQS keeps the [`FastSkinJob::influences`] strongest joints of `w_v`; [`TopKJob`]
+//! writes the `K` strongest joints per vertex in engine layouts (u8/u16 indices,
 //! unorm8/unorm16/f32 weights summing exactly to one) for an engine's own skinning shader.
 
 mod graph;
@@ -30,7 +37,7 @@ mod job;
 mod mesh;
 mod topk;
 
-pub use job::{FastFrame, FastSkinJob};
+pub use job::{FastFrame, FastSkinJob, LOG_WEIGHT_FLOOR};
 pub use mesh::{BindStats, FastMesh};
 pub use topk::{
     TopKIndices, TopKJob, TopKWeights, quantise_largest_remainder, strongest_influences,
@@ -83,8 +90,9 @@ pub struct FastOptions {
     pub nodes: usize,
     /// Nodes each vertex interpolates from (1..=[`MAX_INFLUENCES`]).
     pub neighbours: usize,
-    /// Strongest bind-pose joints kept per vertex as the exact base (0..=[`MAX_INFLUENCES`];
-    /// 0 interpolates the whole weights from the nodes; capped at the joint count).
+    /// Strongest bind-pose joints kept per vertex as the exact base, the joints its weights
+    /// range over in every pose (0..=[`MAX_INFLUENCES`]; 0 interpolates the whole weights
+    /// from the nodes, convexly; capped at the joint count).
     pub base_influences: usize,
     /// Distance used to pick and weight the neighbours.
     pub metric: NodeMetric,

@@ -205,12 +205,12 @@ impl GpuSkinner {
         )?;
 
         // Bind-time data, laid out for the kernels.
-        let mut node_base = vec![0.0f32; mesh.node_count() * j];
-        for (row, &v) in node_base.chunks_exact_mut(j).zip(mesh.node_vertices()) {
-            for b in &mesh.base()[v as usize * kb..(v as usize + 1) * kb] {
-                row[b.index as usize] += b.weight;
-            }
-        }
+        // The log-weight changes' reference (unused, so zero, without a base).
+        let node_base = if kb > 0 {
+            mesh.node_bind_weights().to_vec()
+        } else {
+            vec![0.0f32; mesh.node_count() * j]
+        };
         let mut influences: Vec<Influence> = Vec::with_capacity(v_count * (kb + k));
         for v in 0..v_count {
             influences.extend_from_slice(&mesh.base()[v * kb..(v + 1) * kb]);
@@ -318,7 +318,7 @@ impl GpuSkinner {
         let p = &self.fast;
         Ok(GpuFastMesh {
             bind_residuals: group(&p.residuals, &[7, 10, 13, 14, 15, 16]),
-            bind_lbs: group(&p.lbs, &[7, 11, 12, 13, 16, 17]),
+            bind_lbs: group(&p.lbs, &[7, 11, 12, 13, 15, 16, 17]),
             bind_dqs: group(&p.dqs, &[7, 9, 11, 12, 13, 15, 17]),
             bind_top_k: group(&p.top_k, &[13, 15, 17, 18, 19]),
             nodes,
