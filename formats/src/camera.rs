@@ -6,7 +6,7 @@
 use alloc::string::String;
 use alloc::vec::Vec;
 
-use glam::{Mat3, Vec2, Vec3};
+use glam::{DMat3, DVec2, DVec3, Mat3, Vec2, Vec3};
 
 /// Brown–Conrady lens distortion (OpenCV's `k1, k2, p1, p2, k3`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -36,13 +36,48 @@ impl Distortion {
         if self.is_none() {
             return p;
         }
+        self.apply_f64(p.as_dvec2()).as_vec2()
+    }
+
+    /// Distorts normalised image coordinates in double precision (the formula; [`Self::apply`]
+    /// rounds it).
+    #[must_use]
+    pub fn apply_f64(&self, p: DVec2) -> DVec2 {
+        let [k1, k2, p1, p2, k3] = [self.k1, self.k2, self.p1, self.p2, self.k3].map(f64::from);
         let r2 = p.length_squared();
-        let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
         let xy = p.x * p.y;
-        Vec2::new(
-            p.x * radial + 2.0 * self.p1 * xy + self.p2 * (r2 + 2.0 * p.x * p.x),
-            p.y * radial + self.p1 * (r2 + 2.0 * p.y * p.y) + 2.0 * self.p2 * xy,
+        DVec2::new(
+            p.x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * p.x * p.x),
+            p.y * radial + p1 * (r2 + 2.0 * p.y * p.y) + 2.0 * p2 * xy,
         )
+    }
+
+    /// Inverts [`Self::apply_f64`] by fixed-point iteration (OpenCV's `undistortPoints`
+    /// scheme: `p ← (d − tangential(p)) / radial(p)`), stopping when the re-distorted point is
+    /// within 1e-12 of `d` or after 50 steps; converges for the moderate distortion of
+    /// calibrated lenses.
+    #[must_use]
+    pub fn undistort_f64(&self, d: DVec2) -> DVec2 {
+        if self.is_none() {
+            return d;
+        }
+        let [k1, k2, p1, p2, k3] = [self.k1, self.k2, self.p1, self.p2, self.k3].map(f64::from);
+        let mut p = d;
+        for _ in 0..50 {
+            if (self.apply_f64(p) - d).length() < 1e-12 {
+                break;
+            }
+            let r2 = p.length_squared();
+            let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+            let xy = p.x * p.y;
+            let tangential = DVec2::new(
+                2.0 * p1 * xy + p2 * (r2 + 2.0 * p.x * p.x),
+                p1 * (r2 + 2.0 * p.y * p.y) + 2.0 * p2 * xy,
+            );
+            p = (d - tangential) / radial;
+        }
+        p
     }
 }
 
@@ -154,6 +189,36 @@ impl Camera {
         }
         let n = self.distortion.apply(Vec2::new(c.x / c.z, c.y / c.z));
         Some(Vec2::new(self.fx * n.x + self.cx, self.fy * n.y + self.cy))
+    }
+
+    /// [`Self::project`] in double precision (the camera's parameters widened).
+    #[must_use]
+    pub fn project_f64(&self, world: DVec3) -> Option<DVec2> {
+        let c = self.rotation.as_dmat3() * world + self.translation.as_dvec3();
+        if c.z <= 1e-9 {
+            return None;
+        }
+        let n = self.distortion.apply_f64(DVec2::new(c.x / c.z, c.y / c.z));
+        Some(DVec2::new(
+            f64::from(self.fx) * n.x + f64::from(self.cx),
+            f64::from(self.fy) * n.y + f64::from(self.cy),
+        ))
+    }
+
+    /// The ray through a pixel (undistorted): the camera centre and the unit direction, in world
+    /// coordinates, double precision.
+    #[must_use]
+    pub fn ray_f64(&self, pixel: DVec2) -> (DVec3, DVec3) {
+        let d = DVec2::new(
+            (pixel.x - f64::from(self.cx)) / f64::from(self.fx),
+            (pixel.y - f64::from(self.cy)) / f64::from(self.fy),
+        );
+        let n = self.distortion.undistort_f64(d);
+        // The inverse, not the transpose: a rotation stored in f32 is orthonormal only to about
+        // 1e-7, and rays must invert `project_f64` exactly.
+        let inv: DMat3 = self.rotation.as_dmat3().inverse();
+        let origin = -(inv * self.translation.as_dvec3());
+        (origin, (inv * n.extend(1.0)).normalize())
     }
 
     /// Checks resolution, intrinsics and that the rotation is a rotation.

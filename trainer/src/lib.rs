@@ -12,5 +12,6 @@ pub mod optim;
 pub mod raster;
 pub mod skinnet;
 pub mod synth;
+pub mod track;
 pub mod train;
 pub mod triangle_bvh;

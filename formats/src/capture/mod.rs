@@ -15,6 +15,7 @@
 //!   initial_weights.json          optional SkinFile (CSR static weights) the trainer may start from
 //!   images/{camera}/{frame:05}.png  RGB, sRGB-encoded 8-bit (or .exr: linear float RGB)
 //!   masks/{camera}/{frame:05}.png   8-bit grey, foreground > 127
+//!   keypoints/…                   optional 2D detections in OpenPose JSON ([`keypoints`])
 //!   eval/true_weights.json        EVALUATION ONLY: the ground-truth deformer's static weights
 //!   eval/gt/{frame:05}.bin        EVALUATION ONLY: ground-truth posed positions of a test frame
 //!                                 (b"SFGTMESH", u32 LE version 1, u32 LE vertex count, then
@@ -43,6 +44,7 @@ use crate::skin::StaticSkin;
 
 mod convert;
 mod images;
+pub mod keypoints;
 mod schema;
 mod write;
 
@@ -409,6 +411,9 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
     }
     if let Some(rel) = &m.initial_weights {
         check_relative(&mfile, "initial_weights", rel)?;
+    }
+    if let Some(rel) = &m.keypoints {
+        check_relative(&mfile, "keypoints", rel)?;
     }
     if let Some(e) = &m.evaluation {
         check_relative(&mfile, "evaluation.gt_meshes", &e.gt_meshes)?;

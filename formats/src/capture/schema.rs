@@ -60,6 +60,9 @@ pub struct CaptureManifest {
     /// Encoding of the colour images.
     #[serde(default)]
     pub image_format: ImageFormat,
+    /// Folder of 2D keypoint detections ([`super::keypoints`]), if the capture has them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub keypoints: Option<String>,
     /// Ground truth for evaluation only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<EvaluationEntry>,

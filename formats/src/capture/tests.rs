@@ -82,6 +82,7 @@ fn manifest(format: ImageFormat) -> CaptureManifest {
         images: "images".into(),
         masks: "masks".into(),
         image_format: format,
+        keypoints: None,
         evaluation: Some(EvaluationEntry {
             gt_meshes: "eval/gt".into(),
             true_weights: Some("eval/true_weights.json".into()),

@@ -187,6 +187,7 @@ pub fn write_subject(
         images: "images".into(),
         masks: "masks".into(),
         image_format: config.image_format,
+        keypoints: None,
         evaluation: Some(EvaluationEntry {
             gt_meshes: "eval/gt".into(),
             true_weights: Some("eval/true_weights.json".into()),

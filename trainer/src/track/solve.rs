@@ -1,0 +1,655 @@
+//! Per-frame skeleton fitting to multi-view 2D detections (DeepCap §3.2 turned into an
+//! optimisation): Levenberg–Marquardt over the root rotation and the joint angles, the root
+//! translation from the global alignment layer at every evaluation, the confidence-weighted
+//! keypoint reprojection loss (Eq. 6), the joint-limit prior (Eq. 7), temporal smoothness, and
+//! robust reweighting against outlier detections.
+//!
+//! Robustness: iteratively reweighted least squares with Geman–McClure weights
+//! `(s² / (s² + e²))²` of each detection's reprojection error `e` (pixels), the scale `s` halved
+//! every round from [`TrackOptions::robust_start_px`] down to [`TrackOptions::robust_scale_px`]
+//! (graduated non-convexity: the first rounds see every detection and settle the body, the last
+//! ones ignore what no pose explains, such as a left/right swap in one view). The weights also
+//! scale the rays of the alignment layer, so an outlier moves neither the pose nor `t`.
+//!
+//! Keypoint weights `λ_m` (DeepCap's kinematic-chain-based hierarchical weights, which vary
+//! during training): in the first round `1 / (1 + depth)` of the landmark's joint below the
+//! root, so the torso settles before the limbs; 1 afterwards.
+//!
+//! The Jacobian is taken by central differences of the whole residual (alignment layer
+//! included) in f64; the alignment layer's analytic derivative is tested against the same
+//! differences in `alignment.rs`.
+
+use glam::{DMat4, DQuat, DVec2, DVec3};
+use skinfield_formats::{Camera, JointDofs};
+
+use super::alignment::{Ray, global_alignment};
+use super::kinematics::{Kinematics, Landmark, rotvec_to_dquat};
+
+/// One 2D detection of a landmark in one view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Detection {
+    /// Pixel coordinates (the capture's convention: pixel centres at integer + 0.5).
+    pub pixel: DVec2,
+    /// Detector confidence in `[0, 1]`.
+    pub confidence: f64,
+}
+
+/// Settings of the tracker.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackOptions {
+    /// Detections below this confidence are ignored (DeepCap: 0.4).
+    pub min_confidence: f64,
+    /// Weight of the joint-limit prior, in px² per rad² of excess.
+    pub limit_weight: f64,
+    /// Weight of the temporal term (change from the previous frame of the clip), px² per rad².
+    pub smooth_weight: f64,
+    /// Final Geman–McClure scale (pixels).
+    pub robust_scale_px: f64,
+    /// First-round Geman–McClure scale (pixels).
+    pub robust_start_px: f64,
+    /// Reweighting rounds.
+    pub rounds: usize,
+    /// Levenberg–Marquardt iterations per round (cap).
+    pub iterations: usize,
+    /// Root headings tried (about the up axis) when a frame has no predecessor.
+    pub headings: usize,
+}
+
+impl Default for TrackOptions {
+    fn default() -> Self {
+        Self {
+            min_confidence: 0.4,
+            limit_weight: 1e4,
+            smooth_weight: 25.0,
+            robust_scale_px: 6.0,
+            robust_start_px: 64.0,
+            rounds: 5,
+            iterations: 40,
+            headings: 8,
+        }
+    }
+}
+
+/// A fitted frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameFit {
+    /// Root rotation (applied before the root's bind rotation, as `Skeleton::pose_from_angles`).
+    pub root_rotation: DQuat,
+    /// World-space shift of the skeleton from the alignment layer.
+    pub world_shift: DVec3,
+    /// Joint angles (`Skeleton::angle_count`).
+    pub angles: Vec<f64>,
+    /// Per-frame report.
+    pub report: FrameReport,
+}
+
+/// How well a frame was explained.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameReport {
+    /// Detections at or above the confidence threshold.
+    pub detections: usize,
+    /// Of those, the ones the final reweighting kept (weight ≥ 0.5).
+    pub inliers: usize,
+    /// Root mean square reprojection error over the inliers (pixels).
+    pub rms_inlier_px: f64,
+    /// Median reprojection error over all used detections (pixels).
+    pub median_px: f64,
+    /// Largest joint-limit excess (radians).
+    pub limit_excess: f64,
+    /// Levenberg–Marquardt iterations run in total.
+    pub iterations: usize,
+}
+
+/// Why a frame could not be fitted.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TrackError {
+    /// The detections per view do not match the landmark count.
+    #[error("view {view} has {got} landmark slots, expected {expected}")]
+    LandmarkCount {
+        /// View index.
+        view: usize,
+        /// Slots given.
+        got: usize,
+        /// Landmarks.
+        expected: usize,
+    },
+    /// More views of detections than cameras.
+    #[error("{views} views of detections for {cameras} cameras")]
+    ViewCount {
+        /// Views given.
+        views: usize,
+        /// Cameras.
+        cameras: usize,
+    },
+    /// Too few confident detections to place the skeleton (need two views of something).
+    #[error("too few confident detections ({0}) to place the skeleton")]
+    TooFewDetections(usize),
+    /// A detection is NaN or infinite.
+    #[error("view {view}, landmark {landmark}: non-finite detection")]
+    NonFinite {
+        /// View index.
+        view: usize,
+        /// Landmark index.
+        landmark: usize,
+    },
+}
+
+/// One used detection, with its ray.
+#[derive(Clone, Copy, Debug)]
+struct Observation {
+    view: usize,
+    landmark: usize,
+    pixel: DVec2,
+    confidence: f64,
+    origin: DVec3,
+    direction: DVec3,
+}
+
+/// Fits skeletons to detections, frame by frame.
+#[derive(Clone, Debug)]
+pub struct Tracker<'a> {
+    kinematics: Kinematics,
+    landmarks: Vec<Landmark>,
+    cameras: &'a [Camera],
+    depth: Vec<usize>,
+    up: DVec3,
+    options: TrackOptions,
+}
+
+/// Projection when a point falls behind a camera: a constant far from any image, so the
+/// residual is large and flat there.
+const BEHIND_CAMERA_PX: f64 = 1e4;
+
+impl<'a> Tracker<'a> {
+    /// A tracker for `landmarks` of `kinematics` seen by `cameras`; `up` is the world's up axis
+    /// (the axis of the heading search).
+    #[must_use]
+    pub fn new(
+        kinematics: Kinematics,
+        landmarks: Vec<Landmark>,
+        cameras: &'a [Camera],
+        up: DVec3,
+        options: TrackOptions,
+    ) -> Self {
+        let parents = kinematics.parents();
+        let depth = landmarks
+            .iter()
+            .map(|l| {
+                let (mut d, mut j) = (0, l.joint);
+                while let Some(p) = parents[j] {
+                    d += 1;
+                    j = p;
+                }
+                d
+            })
+            .collect();
+        Self {
+            kinematics,
+            landmarks,
+            cameras,
+            depth,
+            up,
+            options,
+        }
+    }
+
+    /// The kinematics layer.
+    #[must_use]
+    pub fn kinematics(&self) -> &Kinematics {
+        &self.kinematics
+    }
+
+    fn observations(
+        &self,
+        detections: &[Vec<Option<Detection>>],
+    ) -> Result<Vec<Observation>, TrackError> {
+        if detections.len() > self.cameras.len() {
+            return Err(TrackError::ViewCount {
+                views: detections.len(),
+                cameras: self.cameras.len(),
+            });
+        }
+        let mut out = Vec::new();
+        for (view, (slots, camera)) in detections.iter().zip(self.cameras).enumerate() {
+            if slots.len() != self.landmarks.len() {
+                return Err(TrackError::LandmarkCount {
+                    view,
+                    got: slots.len(),
+                    expected: self.landmarks.len(),
+                });
+            }
+            for (landmark, d) in slots.iter().enumerate() {
+                let Some(d) = d else { continue };
+                if !(d.pixel.is_finite() && d.confidence.is_finite()) {
+                    return Err(TrackError::NonFinite { view, landmark });
+                }
+                if d.confidence < self.options.min_confidence {
+                    continue;
+                }
+                let (origin, direction) = camera.ray_f64(d.pixel);
+                out.push(Observation {
+                    view,
+                    landmark,
+                    pixel: d.pixel,
+                    confidence: d.confidence,
+                    origin,
+                    direction,
+                });
+            }
+        }
+        Ok(out)
+    }
+
+    /// Fits one frame. `previous`: the fit of the preceding frame of the same clip (start and
+    /// temporal anchor); without one, [`TrackOptions::headings`] root headings are tried from
+    /// the rest pose and the best kept.
+    pub fn fit(
+        &self,
+        detections: &[Vec<Option<Detection>>],
+        previous: Option<&FrameFit>,
+    ) -> Result<FrameFit, TrackError> {
+        let obs = self.observations(detections)?;
+        if obs.len() < 2 {
+            return Err(TrackError::TooFewDetections(obs.len()));
+        }
+        let a = self.kinematics.angle_count();
+        let starts: Vec<(DQuat, Vec<f64>)> = match previous {
+            Some(p) => vec![(p.root_rotation, p.angles.clone())],
+            None => (0..self.options.headings.max(1))
+                .map(|h| {
+                    let yaw =
+                        core::f64::consts::TAU * h as f64 / self.options.headings.max(1) as f64;
+                    (DQuat::from_axis_angle(self.up, yaw), vec![0.0; a])
+                })
+                .collect(),
+        };
+        let mut best: Option<(f64, FrameFit)> = None;
+        for (root, angles) in starts {
+            let (cost, fit) = self.fit_from(&obs, root, angles, previous)?;
+            if best.as_ref().is_none_or(|(c, _)| cost < *c) {
+                best = Some((cost, fit));
+            }
+        }
+        Ok(best.expect("at least one start").1)
+    }
+
+    fn fit_from(
+        &self,
+        obs: &[Observation],
+        root0: DQuat,
+        angles0: Vec<f64>,
+        previous: Option<&FrameFit>,
+    ) -> Result<(f64, FrameFit), TrackError> {
+        let a = self.kinematics.angle_count();
+        let n = 3 + a;
+        let mut params = vec![0.0; n];
+        params[3..].copy_from_slice(&angles0);
+        let mut robust = vec![1.0; obs.len()];
+        let mut scale = self.options.robust_start_px;
+        let mut ctx = Workspace::new(self, obs.len());
+        let mut iterations = 0;
+        let rounds = self.options.rounds.max(1);
+        let mut cost = f64::INFINITY;
+        for round in 0..rounds {
+            let hierarchical = round == 0 && rounds > 1;
+            let problem = Problem {
+                tracker: self,
+                obs,
+                robust: &robust,
+                hierarchical,
+                root0,
+                previous,
+            };
+            let (c, its) =
+                levenberg_marquardt(&problem, &mut params, self.options.iterations, &mut ctx);
+            cost = c;
+            iterations += its;
+            // Reweight from the current errors.
+            let errors = problem.errors(&params, &mut ctx);
+            if round + 1 < rounds {
+                scale = (scale * 0.5).max(self.options.robust_scale_px);
+            }
+            for (w, e) in robust.iter_mut().zip(&errors) {
+                let s2 = scale * scale;
+                *w = (s2 / (s2 + e * e)).powi(2);
+            }
+        }
+        // Final report with the final weights.
+        let problem = Problem {
+            tracker: self,
+            obs,
+            robust: &robust,
+            hierarchical: false,
+            root0,
+            previous,
+        };
+        let errors = problem.errors(&params, &mut ctx);
+        let (root, shift) = problem.root_and_shift(&params, &mut ctx);
+        let inl: Vec<f64> = errors
+            .iter()
+            .zip(&robust)
+            .filter(|(_, w)| **w >= 0.5)
+            .map(|(e, _)| *e)
+            .collect();
+        let mut sorted = errors.clone();
+        sorted.sort_by(f64::total_cmp);
+        let report = FrameReport {
+            detections: obs.len(),
+            inliers: inl.len(),
+            rms_inlier_px: if inl.is_empty() {
+                0.0
+            } else {
+                (inl.iter().map(|e| e * e).sum::<f64>() / inl.len() as f64).sqrt()
+            },
+            median_px: sorted[sorted.len() / 2],
+            limit_excess: self.limit_excess(&params[3..]),
+            iterations,
+        };
+        Ok((
+            cost,
+            FrameFit {
+                root_rotation: root,
+                world_shift: shift.unwrap_or(DVec3::ZERO),
+                angles: params[3..].to_vec(),
+                report,
+            },
+        ))
+    }
+
+    /// Largest excess of any Euler angle over its limits (radians).
+    fn limit_excess(&self, angles: &[f64]) -> f64 {
+        let mut k = 0;
+        let mut worst: f64 = 0.0;
+        for d in self.kinematics.dofs() {
+            if let JointDofs::Euler { limits, .. } = d {
+                for (i, l) in limits.iter().enumerate() {
+                    let x = angles[k + i];
+                    worst = worst.max(x - f64::from(l[1])).max(f64::from(l[0]) - x);
+                }
+            }
+            k += d.count();
+        }
+        worst
+    }
+}
+
+/// Buffers reused by every residual evaluation of a frame.
+struct Workspace {
+    worlds: Vec<DMat4>,
+    points: Vec<DVec3>,
+    obs_points: Vec<DVec3>,
+    rays: Vec<Ray>,
+}
+
+impl Workspace {
+    fn new(t: &Tracker<'_>, obs: usize) -> Self {
+        Self {
+            worlds: vec![DMat4::IDENTITY; t.kinematics.joint_count()],
+            points: vec![DVec3::ZERO; t.landmarks.len()],
+            obs_points: vec![DVec3::ZERO; obs],
+            rays: Vec::with_capacity(obs),
+        }
+    }
+}
+
+/// One least-squares problem: a frame's observations under fixed robust weights.
+struct Problem<'t, 'a> {
+    tracker: &'t Tracker<'a>,
+    obs: &'t [Observation],
+    robust: &'t [f64],
+    hierarchical: bool,
+    root0: DQuat,
+    previous: Option<&'t FrameFit>,
+}
+
+impl Problem<'_, '_> {
+    fn keypoint_weight(&self, o: &Observation, robust: f64) -> f64 {
+        let lambda = if self.hierarchical {
+            1.0 / (1.0 + self.tracker.depth[o.landmark] as f64)
+        } else {
+            1.0
+        };
+        o.confidence * lambda * robust
+    }
+
+    /// Root rotation and alignment-layer shift for `params` (landmarks left in `ws.points`).
+    fn root_and_shift(&self, params: &[f64], ws: &mut Workspace) -> (DQuat, Option<DVec3>) {
+        let t = self.tracker;
+        let root =
+            (rotvec_to_dquat(DVec3::new(params[0], params[1], params[2])) * self.root0).normalize();
+        t.kinematics.landmarks(
+            root,
+            &params[3..],
+            &t.landmarks,
+            &mut ws.worlds,
+            &mut ws.points,
+        );
+        ws.rays.clear();
+        for (i, o) in self.obs.iter().enumerate() {
+            ws.obs_points[i] = ws.points[o.landmark];
+            ws.rays.push(Ray {
+                origin: o.origin,
+                direction: o.direction,
+                weight: self.keypoint_weight(o, self.robust[i]),
+            });
+        }
+        let shift = global_alignment(&ws.obs_points, &ws.rays).map(|a| a.translation);
+        (root, shift)
+    }
+
+    fn project(&self, o: &Observation, x: DVec3) -> DVec2 {
+        self.tracker.cameras[o.view]
+            .project_f64(x)
+            .unwrap_or(DVec2::splat(BEHIND_CAMERA_PX))
+    }
+
+    /// Reprojection error (pixels) of every observation.
+    fn errors(&self, params: &[f64], ws: &mut Workspace) -> Vec<f64> {
+        let (_, shift) = self.root_and_shift(params, ws);
+        let shift = shift.unwrap_or(DVec3::ZERO);
+        self.obs
+            .iter()
+            .map(|o| (self.project(o, ws.points[o.landmark] + shift) - o.pixel).length())
+            .collect()
+    }
+
+    fn residual_count(&self) -> usize {
+        let a = self.tracker.kinematics.angle_count();
+        let temporal = if self.previous.is_some() { 3 + a } else { 0 };
+        2 * self.obs.len() + a + temporal
+    }
+
+    /// The residual vector: weighted reprojection errors (Eq. 6), limit excesses (Eq. 7),
+    /// temporal changes.
+    fn residuals(&self, params: &[f64], ws: &mut Workspace, out: &mut [f64]) {
+        let t = self.tracker;
+        let (root, shift) = self.root_and_shift(params, ws);
+        let mut k = 0;
+        match shift {
+            Some(shift) => {
+                for (i, o) in self.obs.iter().enumerate() {
+                    let s = self.keypoint_weight(o, self.robust[i]).sqrt();
+                    let e = self.project(o, ws.points[o.landmark] + shift) - o.pixel;
+                    out[k] = s * e.x;
+                    out[k + 1] = s * e.y;
+                    k += 2;
+                }
+            }
+            None => {
+                // The rays do not place the skeleton (every weight collapsed): a flat, large
+                // residual that no step prefers.
+                for v in &mut out[..2 * self.obs.len()] {
+                    *v = BEHIND_CAMERA_PX;
+                }
+                k = 2 * self.obs.len();
+            }
+        }
+        let angles = &params[3..];
+        let lw = t.options.limit_weight.sqrt();
+        let mut a = 0;
+        for d in t.kinematics.dofs() {
+            match d {
+                JointDofs::Euler { limits, .. } => {
+                    for l in limits {
+                        let x = angles[a];
+                        let excess =
+                            (x - f64::from(l[1])).max(0.0) - (f64::from(l[0]) - x).max(0.0);
+                        out[k] = lw * excess;
+                        k += 1;
+                        a += 1;
+                    }
+                }
+                other => {
+                    for _ in 0..other.count() {
+                        out[k] = 0.0;
+                        k += 1;
+                        a += 1;
+                    }
+                }
+            }
+        }
+        if let Some(p) = self.previous {
+            let sw = t.options.smooth_weight.sqrt();
+            let rel = (root * p.root_rotation.inverse()).normalize();
+            let rel = if rel.w < 0.0 { -rel } else { rel };
+            let rv = rel.to_scaled_axis();
+            for c in 0..3 {
+                out[k] = sw * rv[c];
+                k += 1;
+            }
+            for (x, y) in angles.iter().zip(&p.angles) {
+                out[k] = sw * (x - y);
+                k += 1;
+            }
+        }
+        debug_assert_eq!(k, out.len());
+    }
+}
+
+/// Minimises `½‖r(p)‖²` from `params` in place; returns the final cost and the iterations run.
+fn levenberg_marquardt(
+    problem: &Problem<'_, '_>,
+    params: &mut [f64],
+    max_iterations: usize,
+    ws: &mut Workspace,
+) -> (f64, usize) {
+    let n = params.len();
+    let m = problem.residual_count();
+    let mut r = vec![0.0; m];
+    let mut r_try = vec![0.0; m];
+    let mut plus = vec![0.0; m];
+    let mut minus = vec![0.0; m];
+    let mut jac = vec![0.0; m * n];
+    problem.residuals(params, ws, &mut r);
+    let mut cost = 0.5 * r.iter().map(|x| x * x).sum::<f64>();
+    let mut mu = 1e-3;
+    let h = 1e-6;
+    let mut trial = params.to_vec();
+    for it in 0..max_iterations {
+        for c in 0..n {
+            let x = params[c];
+            params[c] = x + h;
+            problem.residuals(params, ws, &mut plus);
+            params[c] = x - h;
+            problem.residuals(params, ws, &mut minus);
+            params[c] = x;
+            for row in 0..m {
+                jac[row * n + c] = (plus[row] - minus[row]) / (2.0 * h);
+            }
+        }
+        let mut jtj = vec![0.0; n * n];
+        let mut jtr = vec![0.0; n];
+        for row in 0..m {
+            let jr = &jac[row * n..(row + 1) * n];
+            for i in 0..n {
+                if jr[i] == 0.0 {
+                    continue;
+                }
+                jtr[i] += jr[i] * r[row];
+                for k in i..n {
+                    jtj[i * n + k] += jr[i] * jr[k];
+                }
+            }
+        }
+        for i in 0..n {
+            for k in 0..i {
+                jtj[i * n + k] = jtj[k * n + i];
+            }
+        }
+        let gradient = jtr.iter().map(|g| g.abs()).fold(0.0, f64::max);
+        if gradient < 1e-14 {
+            return (cost, it);
+        }
+        let mut improved = false;
+        for _ in 0..12 {
+            let mut a = jtj.clone();
+            for i in 0..n {
+                a[i * n + i] += mu * jtj[i * n + i].max(1e-9);
+            }
+            let Some(step) = cholesky_solve(&mut a, &jtr, n) else {
+                mu *= 10.0;
+                continue;
+            };
+            for i in 0..n {
+                trial[i] = params[i] - step[i];
+            }
+            problem.residuals(&trial, ws, &mut r_try);
+            let c = 0.5 * r_try.iter().map(|x| x * x).sum::<f64>();
+            if c < cost {
+                let step_norm = step.iter().map(|s| s * s).sum::<f64>().sqrt();
+                let rel = (cost - c) / cost.max(1e-300);
+                params.copy_from_slice(&trial);
+                core::mem::swap(&mut r, &mut r_try);
+                cost = c;
+                mu = (mu * 0.3).max(1e-12);
+                improved = true;
+                if rel < 1e-12 || step_norm < 1e-12 {
+                    return (cost, it + 1);
+                }
+                break;
+            }
+            mu *= 10.0;
+        }
+        if !improved {
+            return (cost, it + 1);
+        }
+    }
+    (cost, max_iterations)
+}
+
+/// Solves `A x = b` for a symmetric positive definite `A` (`n × n`, overwritten by its
+/// Cholesky factor); `None` when `A` is not positive definite.
+fn cholesky_solve(a: &mut [f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+    for j in 0..n {
+        let mut d = a[j * n + j];
+        for k in 0..j {
+            d -= a[j * n + k] * a[j * n + k];
+        }
+        if !(d > 0.0) {
+            return None;
+        }
+        let d = d.sqrt();
+        a[j * n + j] = d;
+        for i in j + 1..n {
+            let mut s = a[i * n + j];
+            for k in 0..j {
+                s -= a[i * n + k] * a[j * n + k];
+            }
+            a[i * n + j] = s / d;
+        }
+    }
+    let mut y = b.to_vec();
+    for i in 0..n {
+        for k in 0..i {
+            y[i] -= a[i * n + k] * y[k];
+        }
+        y[i] /= a[i * n + i];
+    }
+    for i in (0..n).rev() {
+        for k in i + 1..n {
+            y[i] -= a[k * n + i] * y[k];
+        }
+        y[i] /= a[i * n + i];
+    }
+    Some(y)
+}
