@@ -10,11 +10,11 @@ use skinfield_formats::MAX_JOINTS;
 use super::mesh::FastMesh;
 use super::topk::strongest_influences;
 use super::{Influence, MAX_INFLUENCES};
-use crate::activation::EXP_TAIL;
+
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, VertexOutputs, WeightsJob};
-use crate::kernels::blend;
+use crate::kernels::{blend, softmax8};
 use crate::model::SkinNet;
 use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
 
@@ -164,8 +164,8 @@ impl FastFrame {
         let j = self.joints;
         let (base, base_log) = (mesh.base_of(v), mesh.base_log_of(v));
         let interp = mesh.interp_of(v);
+        // Unused slots stay −∞: weight 0.
         let mut t = [f32::NEG_INFINITY; MAX_INFLUENCES];
-        let mut top = f32::NEG_INFINITY;
         for ((tb, b), &lb) in t.iter_mut().zip(base).zip(base_log) {
             let joint = b.index as usize;
             let change: f32 = interp
@@ -173,26 +173,15 @@ impl FastFrame {
                 .map(|a| a.weight * self.log_changes[a.index as usize * j + joint])
                 .sum();
             *tb = lb + change;
-            top = top.max(*tb);
         }
-        // The softmax's tail rule: below e^-72 of the strongest is exactly zero (no subnormal
-        // floats reach the matrix blends).
-        let mut sum = 0.0;
-        for ((o, b), &tb) in out.iter_mut().zip(base).zip(&t) {
-            let w = if tb - top >= -EXP_TAIL {
-                libm::expf(tb - top)
-            } else {
-                0.0
-            };
+        // Normalised exponentials with the softmax's tail rule: below e^-72 of the strongest is
+        // exactly zero, so no subnormal float reaches the matrix blends.
+        softmax8(mesh.kernel(), &mut t);
+        for ((o, b), &w) in out.iter_mut().zip(base).zip(&t) {
             *o = Influence {
                 index: b.index,
                 weight: w,
             };
-            sum += w;
-        }
-        let inv = 1.0 / sum;
-        for o in &mut out[..base.len()] {
-            o.weight *= inv;
         }
         base.len()
     }
