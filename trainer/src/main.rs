@@ -38,6 +38,8 @@ enum Command {
     Resample(cli::resample::Args),
     /// The character zoo: capture, train and score every shared character; one table.
     Zoo(cli::zoo::Args),
+    /// Skeletal motion from the capture's 2D keypoints, written as a copy of the capture.
+    Track(cli::track::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -58,6 +60,7 @@ fn main() {
         Command::Pose(args) => cli::pose::run(args),
         Command::Resample(args) => cli::resample::run(args),
         Command::Zoo(args) => cli::zoo::run(args),
+        Command::Track(args) => cli::track::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -9,5 +9,6 @@ pub mod pose;
 pub mod render;
 pub mod resample;
 pub mod synth;
+pub mod track;
 pub mod train;
 pub mod zoo;

@@ -57,6 +57,13 @@ pub struct Args {
     /// `--test-motions held-out-phases`.
     #[arg(long, value_delimiter = ',', requires = "character")]
     pub test_clips: Vec<String>,
+    /// Also write 2D keypoint detections (OpenPose JSON) projected from the motion, for
+    /// `trainer track`.
+    #[arg(long)]
+    pub keypoints: bool,
+    /// How the keypoints are corrupted.
+    #[command(flatten)]
+    pub noise: super::track::NoiseArgs,
 }
 
 /// `--test-motions` values.
@@ -116,5 +123,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.character_seconds,
         s.total_seconds
     );
+    if args.keypoints {
+        let capture = skinfield_formats::capture::load_capture(&args.out)
+            .with_context(|| format!("loading the capture {}", args.out.display()))?;
+        super::track::synthesize_keypoints(&capture, &args.noise)?;
+    }
     Ok(())
 }

@@ -151,11 +151,12 @@ mod tests {
                     .max_by(|&a, &b| m[a][c].abs().total_cmp(&m[b][c].abs()))
                     .unwrap();
                 m.swap(c, p);
-                for r in 0..3 {
+                let pivot = m[c];
+                for (r, row) in m.iter_mut().enumerate() {
                     if r != c {
-                        let f = m[r][c] / m[c][c];
-                        for k in c..4 {
-                            m[r][k] -= f * m[c][k];
+                        let f = row[c] / pivot[c];
+                        for (x, p) in row.iter_mut().zip(pivot).skip(c) {
+                            *x -= f * p;
                         }
                     }
                 }

@@ -4,9 +4,11 @@
 //! - [`kinematics`]: joint angles and root rotation → landmark positions (f64);
 //! - [`alignment`]: the root translation in closed form from the rays through the detections;
 //! - [`solve`]: the per-frame robust Levenberg–Marquardt fit;
+//! - [`capture`]: landmark maps, synthetic keypoints in a capture, tracking all its frames;
 //! - [`synthetic`]: detections projected from known landmarks, with noise, drops and swaps.
 
 pub mod alignment;
+pub mod capture;
 pub mod kinematics;
 pub mod solve;
 pub mod synthetic;

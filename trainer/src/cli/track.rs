@@ -1,0 +1,182 @@
+//! `trainer track --capture DIR --out DIR`: skeletal motion from the capture's 2D keypoints
+//! (DeepCap's kinematics and global alignment layers, robust per-frame fit), written as a copy
+//! of the capture whose motion is the tracked one, so `trainer train` runs on it unchanged.
+//! `--synthesize` first writes synthetic detections projected from the capture's own motion
+//! (as `trainer synth --keypoints` does).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args as ClapArgs;
+use skinfield_formats::capture::{Capture, CaptureWriter, MANIFEST_FILE, load_capture};
+use skinfield_trainer::track::TrackOptions;
+use skinfield_trainer::track::capture::{
+    default_landmark_map, mpjpe, track_capture, write_synthetic_keypoints,
+};
+use skinfield_trainer::track::synthetic::DetectionNoise;
+
+/// Arguments of `trainer track`.
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// The capture (with keypoints, or `--synthesize`).
+    #[arg(long)]
+    pub capture: PathBuf,
+    /// Output capture folder: the input's files (hard-linked where possible) with the tracked
+    /// motion, plus `track.csv` (per-frame residuals).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// First write synthetic detections into the input capture, projected from its motion.
+    #[arg(long)]
+    pub synthesize: bool,
+    /// How the synthetic detections are corrupted.
+    #[command(flatten)]
+    pub noise: NoiseArgs,
+    /// Detections below this confidence are ignored.
+    #[arg(long, default_value_t = TrackOptions::default().min_confidence)]
+    pub min_confidence: f64,
+    /// Weight of the temporal term (px² per rad²).
+    #[arg(long, default_value_t = TrackOptions::default().smooth_weight)]
+    pub smooth_weight: f64,
+    /// Weight of the joint-limit prior (px² per rad²).
+    #[arg(long, default_value_t = TrackOptions::default().limit_weight)]
+    pub limit_weight: f64,
+    /// Final scale of the robust loss (pixels).
+    #[arg(long, default_value_t = TrackOptions::default().robust_scale_px)]
+    pub robust_px: f64,
+}
+
+/// Corruption of synthetic detections (`trainer track --synthesize`, `trainer synth
+/// --keypoints`).
+#[derive(ClapArgs, Debug, Clone, Copy)]
+pub struct NoiseArgs {
+    /// Synthetic detections: pixel noise (standard deviation per axis).
+    #[arg(long, default_value_t = DetectionNoise::REFERENCE.sigma_px)]
+    pub noise_px: f64,
+    /// Synthetic detections: share dropped (half missing, half below the confidence threshold).
+    #[arg(long, default_value_t = DetectionNoise::REFERENCE.drop_rate)]
+    pub drop: f64,
+    /// Synthetic detections: probability of a left/right swap per view and pair.
+    #[arg(long, default_value_t = DetectionNoise::REFERENCE.swap_rate)]
+    pub swap: f64,
+    /// Synthetic detections: seed.
+    #[arg(long = "keypoint-seed", default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// Writes synthetic keypoints (the default landmark map of its skeleton) into `capture`.
+pub fn synthesize_keypoints(capture: &Capture, noise: &NoiseArgs) -> anyhow::Result<()> {
+    let noise = DetectionNoise {
+        sigma_px: noise.noise_px,
+        drop_rate: noise.drop,
+        swap_rate: noise.swap,
+        seed: noise.seed,
+    };
+    let map = default_landmark_map(&capture.skeleton);
+    write_synthetic_keypoints(capture, &map, &noise).context("writing synthetic keypoints")?;
+    println!(
+        "wrote {} detections per image ({}) into {}",
+        map.keypoints.len(),
+        map.detector,
+        capture.dir.display()
+    );
+    Ok(())
+}
+
+/// Copies every file of `from` into `to` (hard links where the file system allows), except the
+/// manifest and the motion, which the caller writes.
+fn copy_tree(from: &Path, to: &Path, skip: &[PathBuf]) -> anyhow::Result<()> {
+    std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
+    for entry in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
+        let entry = entry?;
+        let (src, dst) = (entry.path(), to.join(entry.file_name()));
+        if skip.contains(&src) {
+            continue;
+        }
+        if entry.file_type()?.is_dir() {
+            copy_tree(&src, &dst, skip)?;
+        } else {
+            let _ = std::fs::remove_file(&dst);
+            if std::fs::hard_link(&src, &dst).is_err() {
+                std::fs::copy(&src, &dst)
+                    .with_context(|| format!("copying {} to {}", src.display(), dst.display()))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Runs `trainer track`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let load = || {
+        load_capture(&args.capture)
+            .with_context(|| format!("loading the capture {}", args.capture.display()))
+    };
+    let mut capture = load()?;
+    if args.synthesize {
+        synthesize_keypoints(&capture, &args.noise)?;
+        capture = load()?;
+    }
+    if args.out.canonicalize().ok() == args.capture.canonicalize().ok() {
+        anyhow::bail!("--out must differ from --capture (the input keeps its motion)");
+    }
+    let options = TrackOptions {
+        min_confidence: args.min_confidence,
+        smooth_weight: args.smooth_weight,
+        limit_weight: args.limit_weight,
+        robust_scale_px: args.robust_px,
+        ..TrackOptions::default()
+    };
+    let bar = indicatif::ProgressBar::new(capture.frame_count() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("track {bar:30} {pos}/{len} {elapsed_precise}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let start = std::time::Instant::now();
+    let tracked = track_capture(&capture, &options, |_| bar.inc(1))
+        .with_context(|| format!("tracking {}", args.capture.display()))?;
+    bar.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+
+    let motion_path = capture.dir.join(&capture.manifest.motion);
+    copy_tree(
+        &capture.dir,
+        &args.out,
+        &[capture.dir.join(MANIFEST_FILE), motion_path],
+    )?;
+    let writer = CaptureWriter::new(&args.out, capture.manifest.clone())?;
+    writer.write_motion(&tracked.poses, 30.0)?;
+    writer.finish()?;
+
+    let errors = mpjpe(&capture.skeleton, &tracked.poses, &capture.poses)?;
+    let csv_path = args.out.join("track.csv");
+    let mut csv = String::from(
+        "frame,detections,inliers,rms_inlier_px,median_px,limit_excess_rad,iterations,mpjpe_vs_input\n",
+    );
+    for (f, (fit, e)) in tracked.fits.iter().zip(&errors).enumerate() {
+        let r = &fit.report;
+        csv += &format!(
+            "{f},{},{},{:.4},{:.4},{:.5},{},{:.6}\n",
+            r.detections, r.inliers, r.rms_inlier_px, r.median_px, r.limit_excess, r.iterations, e
+        );
+    }
+    skinfield_formats::skf::write_atomic(&csv_path, csv.as_bytes())
+        .with_context(|| format!("writing {}", csv_path.display()))?;
+    let mean = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
+    let worst = errors.iter().copied().fold(0.0, f64::max);
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "tracked {} frames in {seconds:.1} s → {} (per-frame residuals: {})",
+        errors.len(),
+        args.out.display(),
+        csv_path.display()
+    )?;
+    writeln!(
+        out,
+        "mean per-joint position error against the input's motion: {:.3} (worst frame {:.3}) \
+         skeleton units",
+        mean, worst
+    )?;
+    Ok(())
+}

@@ -1,0 +1,344 @@
+//! Tracking a capture on disk: the landmark map of a skeleton, synthetic keypoints written into
+//! a capture, and the frame-by-frame tracking of all its frames.
+
+use glam::{DVec3, Mat4};
+use skinfield_formats::capture::keypoints::{BODY_25, Keypoint2d, LandmarkEntry, LandmarkMapFile};
+use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
+use skinfield_formats::{Pose, Skeleton, SkeletonError};
+
+use super::kinematics::{Kinematics, Landmark};
+use super::solve::{Detection, FrameFit, TrackError, TrackOptions, Tracker};
+use super::synthetic::{BODY_25_PAIRS, BUILT_IN_BODY_25, DetectionNoise, detect, noise_rng};
+
+/// Folder the synthetic keypoints go to, relative to the capture.
+pub const KEYPOINTS_FOLDER: &str = "keypoints";
+
+/// Why tracking a capture failed.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureTrackError {
+    /// Reading or writing the capture.
+    #[error(transparent)]
+    Capture(#[from] CaptureError),
+    /// The capture has no keypoints.
+    #[error("the capture has no keypoints (manifest field `keypoints`)")]
+    NoKeypoints,
+    /// A frame could not be fitted.
+    #[error("frame {frame}: {source}")]
+    Frame {
+        /// The frame.
+        frame: usize,
+        /// Why.
+        source: TrackError,
+    },
+    /// A pose did not fit the skeleton.
+    #[error(transparent)]
+    Skeleton(#[from] SkeletonError),
+}
+
+/// The landmark map for `skeleton`: OpenPose BODY_25 when it has the built-in character's
+/// joints, otherwise one keypoint per joint (detector `joints`, keypoint = joint name), the
+/// layout of a detector trained on that rig.
+#[must_use]
+pub fn default_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
+    let builtin = BUILT_IN_BODY_25
+        .iter()
+        .all(|(_, joint, _)| skeleton.find(joint).is_some());
+    if builtin {
+        LandmarkMapFile {
+            format: "skinfield-landmarks".into(),
+            detector: "BODY_25".into(),
+            keypoints: BODY_25.iter().map(|s| (*s).to_owned()).collect(),
+            landmarks: BUILT_IN_BODY_25
+                .iter()
+                .map(|(k, j, o)| LandmarkEntry {
+                    keypoint: (*k).to_owned(),
+                    joint: (*j).to_owned(),
+                    offset: *o,
+                })
+                .collect(),
+        }
+    } else {
+        LandmarkMapFile {
+            format: "skinfield-landmarks".into(),
+            detector: "joints".into(),
+            keypoints: skeleton.names().to_vec(),
+            landmarks: skeleton
+                .names()
+                .iter()
+                .map(|n| LandmarkEntry {
+                    keypoint: n.clone(),
+                    joint: n.clone(),
+                    offset: [0.0; 3],
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The tracker's landmarks of a (validated) map, and for each the index of its keypoint in the
+/// detector's output.
+#[must_use]
+pub fn landmarks_of(map: &LandmarkMapFile, skeleton: &Skeleton) -> Vec<(usize, Landmark)> {
+    map.landmarks
+        .iter()
+        .filter_map(|l| {
+            let k = map.keypoints.iter().position(|n| *n == l.keypoint)?;
+            let joint = skeleton.find(&l.joint)?;
+            Some((
+                k,
+                Landmark {
+                    joint,
+                    offset: glam::Vec3::from_array(l.offset).as_dvec3(),
+                },
+            ))
+        })
+        .collect()
+}
+
+/// Left/right keypoint pairs of a map (BODY_25's, or joints named `l_*`/`r_*`, `Left*`/`Right*`
+/// or `*.L`/`*.R`), the pairs a synthetic swap exchanges.
+#[must_use]
+pub fn left_right_pairs(map: &LandmarkMapFile) -> Vec<(usize, usize)> {
+    if map.detector == "BODY_25" {
+        return BODY_25_PAIRS.to_vec();
+    }
+    let mirror = |n: &str| -> Option<String> {
+        for (l, r) in [("l_", "r_"), ("Left", "Right"), ("left", "right")] {
+            if let Some(rest) = n.strip_prefix(l) {
+                return Some(format!("{r}{rest}"));
+            }
+        }
+        n.strip_suffix(".L").map(|rest| format!("{rest}.R"))
+    };
+    let k = &map.keypoints;
+    (0..k.len())
+        .filter_map(|i| {
+            let m = mirror(&k[i])?;
+            let j = k.iter().position(|n| *n == m)?;
+            Some((i, j))
+        })
+        .collect()
+}
+
+/// World positions of `landmarks` in `pose` (f32 forward kinematics, widened).
+fn landmark_positions(
+    skeleton: &Skeleton,
+    pose: &Pose,
+    landmarks: &[(usize, Landmark)],
+    worlds: &mut [Mat4],
+) -> Result<Vec<DVec3>, SkeletonError> {
+    skeleton.world_matrices(pose, worlds)?;
+    Ok(landmarks
+        .iter()
+        .map(|(_, l)| worlds[l.joint].as_dmat4().transform_point3(l.offset))
+        .collect())
+}
+
+/// Writes synthetic detections of every frame and camera into the capture (its `keypoints`
+/// folder and landmark map), projected from the capture's motion with `noise`, and sets the
+/// manifest's `keypoints` field.
+pub fn write_synthetic_keypoints(
+    capture: &Capture,
+    map: &LandmarkMapFile,
+    noise: &DetectionNoise,
+) -> Result<(), CaptureTrackError> {
+    let mut manifest = capture.manifest.clone();
+    manifest.keypoints = Some(KEYPOINTS_FOLDER.into());
+    let writer = CaptureWriter::new(&capture.dir, manifest)?;
+    writer.write_landmark_map(map)?;
+    let landmarks = landmarks_of(map, &capture.skeleton);
+    // Pairs of keypoints, as pairs of landmark slots (the order `detect` sees).
+    let slot = |k: usize| landmarks.iter().position(|(i, _)| *i == k);
+    let pairs: Vec<(usize, usize)> = left_right_pairs(map)
+        .into_iter()
+        .filter_map(|(a, b)| Some((slot(a)?, slot(b)?)))
+        .collect();
+    let mut rng = noise_rng(noise);
+    let mut worlds = vec![Mat4::IDENTITY; capture.skeleton.len()];
+    for (frame, pose) in capture.poses.iter().enumerate() {
+        let points = landmark_positions(&capture.skeleton, pose, &landmarks, &mut worlds)?;
+        let views = detect(&capture.rig.cameras, &points, &pairs, noise, &mut rng);
+        for (cam, view) in views.iter().enumerate() {
+            let mut keypoints = vec![None; map.keypoints.len()];
+            for ((k, _), d) in landmarks.iter().zip(view) {
+                keypoints[*k] = d.map(|d| Keypoint2d {
+                    x: d.pixel.x as f32,
+                    y: d.pixel.y as f32,
+                    confidence: d.confidence as f32,
+                });
+            }
+            writer.write_keypoints(cam, frame, &keypoints)?;
+        }
+    }
+    writer.finish()?;
+    Ok(())
+}
+
+/// One tracked capture.
+#[derive(Clone, Debug)]
+pub struct TrackedMotion {
+    /// One pose per frame.
+    pub poses: Vec<Pose>,
+    /// The fit of every frame.
+    pub fits: Vec<FrameFit>,
+}
+
+/// Tracks every frame of `capture` from its keypoints, in frame order; a frame starts from the
+/// previous one when both belong to the same clip (the manifest's clips), otherwise from a
+/// heading search. `progress` is called after each frame.
+pub fn track_capture(
+    capture: &Capture,
+    options: &TrackOptions,
+    mut progress: impl FnMut(usize),
+) -> Result<TrackedMotion, CaptureTrackError> {
+    let map = capture
+        .landmark_map()?
+        .ok_or(CaptureTrackError::NoKeypoints)?;
+    let landmarks = landmarks_of(&map, &capture.skeleton);
+    let kinematics = Kinematics::new(&capture.skeleton);
+    let tracker = Tracker::new(
+        kinematics.clone(),
+        landmarks.iter().map(|(_, l)| *l).collect(),
+        &capture.rig.cameras,
+        capture.up_axis.unit().as_dvec3(),
+        options.clone(),
+    );
+    let clip_of = |f: usize| {
+        capture
+            .manifest
+            .clips
+            .iter()
+            .position(|c| (c.first..c.first + c.count).contains(&f))
+    };
+    let mut fits: Vec<FrameFit> = Vec::with_capacity(capture.frame_count());
+    let mut poses = Vec::with_capacity(capture.frame_count());
+    for frame in 0..capture.frame_count() {
+        let mut views = Vec::with_capacity(capture.rig.cameras.len());
+        for cam in 0..capture.rig.cameras.len() {
+            let k = capture.keypoints(cam, frame, map.keypoints.len())?;
+            views.push(
+                landmarks
+                    .iter()
+                    .map(|(i, _)| {
+                        k[*i].map(|d| Detection {
+                            pixel: glam::DVec2::new(f64::from(d.x), f64::from(d.y)),
+                            confidence: f64::from(d.confidence),
+                        })
+                    })
+                    .collect::<Vec<_>>(),
+            );
+        }
+        let previous =
+            (frame > 0 && clip_of(frame).is_some() && clip_of(frame) == clip_of(frame - 1))
+                .then(|| &fits[frame - 1]);
+        let fit = tracker
+            .fit(&views, previous)
+            .map_err(|source| CaptureTrackError::Frame { frame, source })?;
+        poses.push(kinematics.pose(
+            &capture.skeleton,
+            fit.root_rotation,
+            fit.world_shift,
+            &fit.angles,
+        )?);
+        fits.push(fit);
+        progress(frame);
+    }
+    Ok(TrackedMotion { poses, fits })
+}
+
+/// Mean per-joint position error between two motions of the same skeleton, per frame (units
+/// of the skeleton).
+pub fn mpjpe(skeleton: &Skeleton, a: &[Pose], b: &[Pose]) -> Result<Vec<f64>, SkeletonError> {
+    let mut wa = vec![Mat4::IDENTITY; skeleton.len()];
+    let mut wb = vec![Mat4::IDENTITY; skeleton.len()];
+    a.iter()
+        .zip(b)
+        .map(|(pa, pb)| {
+            skeleton.world_matrices(pa, &mut wa)?;
+            skeleton.world_matrices(pb, &mut wb)?;
+            Ok(wa
+                .iter()
+                .zip(&wb)
+                .map(|(x, y)| f64::from(x.w_axis.truncate().distance(y.w_axis.truncate())))
+                .sum::<f64>()
+                / skeleton.len() as f64)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use skinfield_formats::capture::load_capture;
+
+    use super::*;
+
+    #[test]
+    fn exact_keypoints_written_into_a_capture_track_back_to_its_motion() {
+        let dir = tempfile::tempdir().unwrap();
+        let config = crate::synth::SynthConfig {
+            cameras: 4,
+            width: 96,
+            height: 96,
+            ..crate::synth::SynthConfig::tiny()
+        };
+        crate::synth::synthesize(dir.path(), &config).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        assert!(capture.landmark_map().unwrap().is_none());
+        assert!(matches!(
+            track_capture(&capture, &TrackOptions::default(), |_| {}),
+            Err(CaptureTrackError::NoKeypoints)
+        ));
+        let map = default_landmark_map(&capture.skeleton);
+        assert_eq!(map.detector, "BODY_25");
+        let exact = DetectionNoise {
+            sigma_px: 0.0,
+            drop_rate: 0.0,
+            swap_rate: 0.0,
+            seed: 0,
+        };
+        write_synthetic_keypoints(&capture, &map, &exact).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        assert_eq!(capture.landmark_map().unwrap().as_ref(), Some(&map));
+        let mut frames = 0;
+        let tracked = track_capture(&capture, &TrackOptions::default(), |_| frames += 1).unwrap();
+        assert_eq!(frames, capture.frame_count());
+        // Every detected landmark lands where it was (joints no keypoint sees, such as the
+        // spine or the clavicles, are only determined up to the skeleton's null space, so MPJPE
+        // over all joints is a measurement, not an identity).
+        let landmarks = landmarks_of(&map, &capture.skeleton);
+        let mut worlds = vec![Mat4::IDENTITY; capture.skeleton.len()];
+        let mut worst = 0.0f64;
+        for (got, want) in tracked.poses.iter().zip(&capture.poses) {
+            let g = landmark_positions(&capture.skeleton, got, &landmarks, &mut worlds).unwrap();
+            let w = landmark_positions(&capture.skeleton, want, &landmarks, &mut worlds).unwrap();
+            for (a, b) in g.iter().zip(&w) {
+                worst = worst.max(a.distance(*b));
+            }
+        }
+        // f32 poses and pixels: micrometres.
+        assert!(worst < 1e-5, "worst landmark {worst} m");
+        let errors = mpjpe(&capture.skeleton, &tracked.poses, &capture.poses).unwrap();
+        assert!(errors.iter().all(|e| *e < 1e-3), "{errors:?}");
+    }
+
+    #[test]
+    fn left_right_pairs_are_found_by_name() {
+        let map = LandmarkMapFile {
+            format: "skinfield-landmarks".into(),
+            detector: "joints".into(),
+            keypoints: [
+                "hips",
+                "l_knee",
+                "r_knee",
+                "LeftHand",
+                "RightHand",
+                "arm.L",
+                "arm.R",
+            ]
+            .map(String::from)
+            .to_vec(),
+            landmarks: Vec::new(),
+        };
+        assert_eq!(left_right_pairs(&map), vec![(1, 2), (3, 4), (5, 6)]);
+    }
+}
