@@ -19,7 +19,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::CaptureError;
+use super::write::write_file;
+use super::{Capture, CaptureError, CaptureWriter, MAX_JSON_BYTES, read_json};
 
 /// OpenPose's BODY_25 keypoint names, in its order.
 pub const BODY_25: [&str; 25] = [
@@ -256,6 +257,121 @@ pub fn validate_landmarks(
         }
     }
     Ok(())
+}
+
+/// File name of the landmark map inside the keypoints folder.
+pub const LANDMARKS_FILE: &str = "landmarks.json";
+
+impl Capture {
+    /// The capture's landmark map, validated against its skeleton; `None` when the capture has
+    /// no keypoints.
+    pub fn landmark_map(&self) -> Result<Option<LandmarkMapFile>, CaptureError> {
+        let Some(folder) = &self.manifest.keypoints else {
+            return Ok(None);
+        };
+        let file = self.dir.join(folder).join(LANDMARKS_FILE);
+        let map: LandmarkMapFile = read_json(&file)?;
+        validate_landmarks(&file, &map, self.skeleton.names())?;
+        Ok(Some(map))
+    }
+
+    /// The detections of camera `cam` at `frame` (`keypoint_count` = the map's keypoints);
+    /// a missing file means nothing was detected in that image.
+    pub fn keypoints(
+        &self,
+        cam: usize,
+        frame: usize,
+        keypoint_count: usize,
+    ) -> Result<Vec<Option<Keypoint2d>>, CaptureError> {
+        let folder = self.manifest.keypoints.as_deref().ok_or_else(|| {
+            CaptureError::invalid(
+                &self.dir.join(super::MANIFEST_FILE),
+                "keypoints",
+                "the capture has no keypoints",
+            )
+        })?;
+        let camera = &self
+            .rig
+            .cameras
+            .get(cam)
+            .ok_or_else(|| {
+                CaptureError::invalid(
+                    &self.dir.join(super::MANIFEST_FILE),
+                    "cameras",
+                    format!("camera index {cam} out of range"),
+                )
+            })?
+            .name;
+        let file = keypoints_file(&self.dir, folder, camera, frame);
+        let io = |source| CaptureError::Io {
+            file: file.clone(),
+            source,
+        };
+        let len = match std::fs::metadata(&file) {
+            Ok(m) => m.len(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Ok(vec![None; keypoint_count]);
+            }
+            Err(e) => return Err(io(e)),
+        };
+        if len > MAX_JSON_BYTES {
+            return Err(CaptureError::BadFile {
+                file,
+                reason: format!("{len} bytes, more than {MAX_JSON_BYTES}"),
+            });
+        }
+        let bytes = std::fs::read(&file).map_err(io)?;
+        parse_openpose(&file, &bytes, keypoint_count)
+    }
+}
+
+impl CaptureWriter {
+    /// Writes the landmark map into the manifest's `keypoints` folder (which must be set).
+    pub fn write_landmark_map(&self, map: &LandmarkMapFile) -> Result<(), CaptureError> {
+        let folder = self.keypoints_folder()?;
+        let path = self.dir().join(folder).join(LANDMARKS_FILE);
+        let bytes = serde_json::to_vec_pretty(map).map_err(|source| CaptureError::Json {
+            file: path.clone(),
+            source,
+        })?;
+        write_file(&path, &bytes)
+    }
+
+    /// Writes the detections of camera `cam` at `frame` as an OpenPose file.
+    pub fn write_keypoints(
+        &self,
+        cam: usize,
+        frame: usize,
+        keypoints: &[Option<Keypoint2d>],
+    ) -> Result<(), CaptureError> {
+        let folder = self.keypoints_folder()?;
+        let camera = &self
+            .manifest()
+            .cameras
+            .get(cam)
+            .ok_or_else(|| {
+                CaptureError::invalid(
+                    &self.dir().join(super::MANIFEST_FILE),
+                    "cameras",
+                    format!("camera index {cam} out of range"),
+                )
+            })?
+            .name;
+        write_file(
+            &keypoints_file(self.dir(), folder, camera, frame),
+            &openpose_json(keypoints),
+        )
+    }
+
+    fn keypoints_folder(&self) -> Result<&str, CaptureError> {
+        self.manifest().keypoints.as_deref().ok_or_else(|| {
+            CaptureError::invalid(
+                &self.dir().join(super::MANIFEST_FILE),
+                "keypoints",
+                "not set in the manifest given to the writer",
+            )
+        })
+    }
 }
 
 #[cfg(test)]

@@ -102,7 +102,7 @@ fn to_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), CaptureErr
     write_file(path, &bytes)
 }
 
-fn write_file(path: &Path, bytes: &[u8]) -> Result<(), CaptureError> {
+pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), CaptureError> {
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|source| CaptureError::Io {
             file: dir.to_owned(),
