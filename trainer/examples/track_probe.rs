@@ -3,7 +3,7 @@
 //! the true motion, for several noise levels and camera counts.
 //!
 //! ```text
-//! cargo run --release -p skinfield-trainer --example track_probe
+//! cargo run --release -p skinfield-trainer --example track_probe [-- --worst]
 //! ```
 //!
 //! Every row: the built-in skeleton (24 joints), the motion library's 80 training and 24 test
@@ -17,21 +17,19 @@ use glam::{DMat4, DVec3, Mat4};
 use skinfield_trainer::synth::character::build_skeleton;
 use skinfield_trainer::synth::motion::{TestMotions, library};
 use skinfield_trainer::synth::rig::camera_rig;
-use skinfield_trainer::track::synthetic::{
-    BODY_25_PAIRS, BUILT_IN_BODY_25, DetectionNoise, detect, noise_rng,
-};
+use skinfield_trainer::track::capture::{default_landmark_map, landmarks_of};
+use skinfield_trainer::track::synthetic::{BODY_25_PAIRS, DetectionNoise, detect, noise_rng};
 use skinfield_trainer::track::{FrameFit, Kinematics, Landmark, TrackOptions, Tracker};
 
 fn main() {
+    // `-- --worst`: also print every frame whose MPJPE exceeds 5 cm.
+    let verbose = std::env::args().any(|a| a == "--worst");
     let skeleton = build_skeleton().unwrap();
     let kin = Kinematics::new(&skeleton);
     let frames = library(&skeleton, 16, 8, TestMotions::Novel, 0).unwrap();
-    let landmarks: Vec<Landmark> = BUILT_IN_BODY_25
-        .iter()
-        .map(|(_, joint, o)| Landmark {
-            joint: skeleton.find(joint).unwrap(),
-            offset: glam::Vec3::from_array(*o).as_dvec3(),
-        })
+    let landmarks: Vec<Landmark> = landmarks_of(&default_landmark_map(&skeleton), &skeleton)
+        .into_iter()
+        .map(|(_, l)| l)
         .collect();
     let rows: Vec<(f64, usize)> = vec![
         (0.0, 12),
@@ -86,6 +84,14 @@ fn main() {
                 })
                 .sum::<f64>()
                 / skeleton.len() as f64;
+            if verbose && err > 0.05 {
+                eprintln!(
+                    "  σ {sigma} px, {cams} cameras: frame of clip {} MPJPE {:.2} cm, {:?}",
+                    f.clip,
+                    100.0 * err,
+                    fit.report
+                );
+            }
             sum += err;
             worst = worst.max(err);
             count += 1;

@@ -151,13 +151,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let errors = mpjpe(&capture.skeleton, &tracked.poses, &capture.poses)?;
     let csv_path = args.out.join("track.csv");
     let mut csv = String::from(
-        "frame,detections,inliers,rms_inlier_px,median_px,limit_excess_rad,iterations,mpjpe_vs_input\n",
+        "frame,detections,inliers,far,rms_inlier_px,median_px,limit_excess_rad,iterations,mpjpe_vs_input\n",
     );
     for (f, (fit, e)) in tracked.fits.iter().zip(&errors).enumerate() {
         let r = &fit.report;
         csv += &format!(
-            "{f},{},{},{:.4},{:.4},{:.5},{},{:.6}\n",
-            r.detections, r.inliers, r.rms_inlier_px, r.median_px, r.limit_excess, r.iterations, e
+            "{f},{},{},{},{:.4},{:.4},{:.5},{},{:.6}\n",
+            r.detections,
+            r.inliers,
+            r.far,
+            r.rms_inlier_px,
+            r.median_px,
+            r.limit_excess,
+            r.iterations,
+            e
         );
     }
     skinfield_formats::skf::write_atomic(&csv_path, csv.as_bytes())

@@ -22,7 +22,7 @@ mod tests {
     use glam::{DMat4, DQuat, DVec3, Mat4, Quat};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use skinfield_formats::{JointDofs, Skeleton};
+    use skinfield_formats::{Camera, JointDofs, Skeleton};
 
     use super::*;
     use crate::synth::character::build_skeleton;
@@ -46,6 +46,60 @@ mod tests {
             }
         }
         out
+    }
+
+    /// Every point projected into every camera, exactly, with one confidence.
+    fn exact_detections(
+        cameras: &[Camera],
+        points: &[DVec3],
+        confidence: f64,
+    ) -> Vec<Vec<Option<Detection>>> {
+        cameras
+            .iter()
+            .map(|c| {
+                points
+                    .iter()
+                    .map(|p| {
+                        c.project_f64(*p)
+                            .map(|pixel| Detection { pixel, confidence })
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Fits one frame without a predecessor; returns the fit and its worst landmark distance
+    /// from `truth` (world positions).
+    fn fit_and_worst(
+        kin: &Kinematics,
+        landmarks: &[Landmark],
+        cameras: &[Camera],
+        detections: &[Vec<Option<Detection>>],
+        truth: &[DVec3],
+    ) -> (FrameFit, f64) {
+        let tracker = Tracker::new(
+            kin.clone(),
+            landmarks.to_vec(),
+            cameras,
+            DVec3::Y,
+            TrackOptions::default(),
+        );
+        let fit = tracker.fit(detections, None).unwrap();
+        let mut worlds = vec![DMat4::IDENTITY; kin.joint_count()];
+        let mut got = vec![DVec3::ZERO; landmarks.len()];
+        kin.landmarks(
+            fit.root_rotation,
+            &fit.angles,
+            landmarks,
+            &mut worlds,
+            &mut got,
+        );
+        let worst = got
+            .iter()
+            .zip(truth)
+            .map(|(g, t)| (*g + fit.world_shift).distance(*t))
+            .fold(0.0, f64::max);
+        (fit, worst)
     }
 
     #[test]
@@ -108,42 +162,9 @@ mod tests {
         let mut worlds = vec![DMat4::IDENTITY; skeleton.len()];
         let mut truth = vec![DVec3::ZERO; landmarks.len()];
         kin.landmarks(root, &angles, &landmarks, &mut worlds, &mut truth);
-        let detections: Vec<Vec<Option<Detection>>> = rig
-            .cameras
-            .iter()
-            .map(|c| {
-                truth
-                    .iter()
-                    .map(|p| {
-                        c.project_f64(*p + shift).map(|pixel| Detection {
-                            pixel,
-                            confidence: 1.0,
-                        })
-                    })
-                    .collect()
-            })
-            .collect();
-        let tracker = Tracker::new(
-            kin.clone(),
-            landmarks.clone(),
-            &rig.cameras,
-            DVec3::Y,
-            TrackOptions::default(),
-        );
-        let fit = tracker.fit(&detections, None).unwrap();
-        let mut got = vec![DVec3::ZERO; landmarks.len()];
-        kin.landmarks(
-            fit.root_rotation,
-            &fit.angles,
-            &landmarks,
-            &mut worlds,
-            &mut got,
-        );
-        let worst = got
-            .iter()
-            .zip(&truth)
-            .map(|(g, t)| (*g + fit.world_shift).distance(*t + shift))
-            .fold(0.0, f64::max);
+        let world: Vec<DVec3> = truth.iter().map(|p| *p + shift).collect();
+        let detections = exact_detections(&rig.cameras, &world, 1.0);
+        let (fit, worst) = fit_and_worst(&kin, &landmarks, &rig.cameras, &detections, &world);
         assert!(worst < 1e-9, "worst landmark {worst} m, {:?}", fit.report);
         assert!(fit.report.rms_inlier_px < 1e-8, "{:?}", fit.report);
         assert_eq!(fit.report.inliers, fit.report.detections);
@@ -151,17 +172,15 @@ mod tests {
 
     #[test]
     fn a_left_right_swap_in_one_view_is_rejected_as_an_outlier() {
-        use crate::track::synthetic::{BODY_25_PAIRS, BUILT_IN_BODY_25};
+        use crate::track::synthetic::BODY_25_PAIRS;
         let skeleton = build_skeleton().unwrap();
         let kin = Kinematics::new(&skeleton);
         let rig = camera_rig(8, 256, 256, 1);
-        let landmarks: Vec<Landmark> = BUILT_IN_BODY_25
-            .iter()
-            .map(|(_, joint, o)| Landmark {
-                joint: skeleton.find(joint).unwrap(),
-                offset: glam::Vec3::from_array(*o).as_dvec3(),
-            })
-            .collect();
+        let landmarks: Vec<Landmark> =
+            capture::landmarks_of(&capture::default_landmark_map(&skeleton), &skeleton)
+                .into_iter()
+                .map(|(_, l)| l)
+                .collect();
         let mut rng = ChaCha8Rng::seed_from_u64(21);
         let angles: Vec<f64> = random_angles(&skeleton, &mut rng)
             .iter()
@@ -171,46 +190,12 @@ mod tests {
         let mut worlds = vec![DMat4::IDENTITY; skeleton.len()];
         let mut truth = vec![DVec3::ZERO; landmarks.len()];
         kin.landmarks(root, &angles, &landmarks, &mut worlds, &mut truth);
-        let mut detections: Vec<Vec<Option<Detection>>> = rig
-            .cameras
-            .iter()
-            .map(|c| {
-                truth
-                    .iter()
-                    .map(|p| {
-                        c.project_f64(*p).map(|pixel| Detection {
-                            pixel,
-                            confidence: 0.9,
-                        })
-                    })
-                    .collect()
-            })
-            .collect();
+        let mut detections = exact_detections(&rig.cameras, &truth, 0.9);
         // Wrists and ankles swapped in view 0.
         for &(a, b) in &[BODY_25_PAIRS[2], BODY_25_PAIRS[5]] {
             detections[0].swap(a, b);
         }
-        let tracker = Tracker::new(
-            kin.clone(),
-            landmarks.clone(),
-            &rig.cameras,
-            DVec3::Y,
-            TrackOptions::default(),
-        );
-        let fit = tracker.fit(&detections, None).unwrap();
-        let mut got = vec![DVec3::ZERO; landmarks.len()];
-        kin.landmarks(
-            fit.root_rotation,
-            &fit.angles,
-            &landmarks,
-            &mut worlds,
-            &mut got,
-        );
-        let worst = got
-            .iter()
-            .zip(&truth)
-            .map(|(g, t)| (*g + fit.world_shift).distance(*t))
-            .fold(0.0, f64::max);
+        let (fit, worst) = fit_and_worst(&kin, &landmarks, &rig.cameras, &detections, &truth);
         // The Geman–McClure weights of the four swapped detections are not exactly zero, so
         // they pull by a small residual amount: well under a millimetre.
         assert!(worst < 1e-3, "worst landmark {worst} m, {:?}", fit.report);

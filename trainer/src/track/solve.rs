@@ -94,6 +94,10 @@ pub struct FrameReport {
     pub rms_inlier_px: f64,
     /// Median reprojection error over all used detections (pixels).
     pub median_px: f64,
+    /// Detections more than [`FAR_FACTOR`] × the final robust scale off: a fit in a wrong
+    /// minimum leaves many, a good one only the detector's outliers (`track.csv` lists it, so
+    /// such frames can be found without ground truth).
+    pub far: usize,
     /// Largest joint-limit excess (radians).
     pub limit_excess: f64,
     /// Levenberg–Marquardt iterations run in total.
@@ -156,6 +160,8 @@ pub struct Tracker<'a> {
     options: TrackOptions,
 }
 
+/// A detection this many final robust scales off counts as far ([`FrameReport::far`]).
+pub const FAR_FACTOR: f64 = 5.0;
 /// Projection when a point falls behind a camera: a constant far from any image, so the
 /// residual is large and flat there.
 const BEHIND_CAMERA_PX: f64 = 1e4;
@@ -253,19 +259,32 @@ impl<'a> Tracker<'a> {
             return Err(TrackError::TooFewDetections(obs.len()));
         }
         let a = self.kinematics.angle_count();
-        let starts: Vec<(DQuat, Vec<f64>)> = match previous {
-            Some(p) => vec![(p.root_rotation, p.angles.clone())],
-            None => (0..self.options.headings.max(1))
-                .map(|h| {
-                    let yaw =
-                        core::f64::consts::TAU * h as f64 / self.options.headings.max(1) as f64;
+        let headings = || -> Vec<(DQuat, Vec<f64>)> {
+            let h = self.options.headings.max(1);
+            (0..h)
+                .map(|i| {
+                    let yaw = core::f64::consts::TAU * i as f64 / h as f64;
                     (DQuat::from_axis_angle(self.up, yaw), vec![0.0; a])
                 })
-                .collect(),
+                .collect()
         };
+        let starts = match previous {
+            Some(p) => vec![(p.root_rotation, p.angles.clone())],
+            None => headings(),
+        };
+        self.best_of(&obs, starts, previous)
+    }
+
+    /// The lowest-cost fit over `starts`.
+    fn best_of(
+        &self,
+        obs: &[Observation],
+        starts: Vec<(DQuat, Vec<f64>)>,
+        previous: Option<&FrameFit>,
+    ) -> Result<FrameFit, TrackError> {
         let mut best: Option<(f64, FrameFit)> = None;
         for (root, angles) in starts {
-            let (cost, fit) = self.fit_from(&obs, root, angles, previous)?;
+            let (cost, fit) = self.fit_from(obs, root, angles, previous)?;
             if best.as_ref().is_none_or(|(c, _)| cost < *c) {
                 best = Some((cost, fit));
             }
@@ -342,6 +361,10 @@ impl<'a> Tracker<'a> {
                 (inl.iter().map(|e| e * e).sum::<f64>() / inl.len() as f64).sqrt()
             },
             median_px: sorted[sorted.len() / 2],
+            far: errors
+                .iter()
+                .filter(|e| **e > FAR_FACTOR * self.options.robust_scale_px)
+                .count(),
             limit_excess: self.limit_excess(&params[3..]),
             iterations,
         };
