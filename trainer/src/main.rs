@@ -68,3 +68,17 @@ fn main() {
         std::process::exit(1);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    use super::Cli;
+
+    /// Clap's own consistency checks (duplicate argument ids from flattened groups, conflicting
+    /// names, bad defaults), which otherwise surface only when a user runs the command.
+    #[test]
+    fn command_line_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+}

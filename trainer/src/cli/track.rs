@@ -60,8 +60,8 @@ pub struct NoiseArgs {
     #[arg(long, default_value_t = DetectionNoise::REFERENCE.swap_rate)]
     pub swap: f64,
     /// Synthetic detections: seed.
-    #[arg(long = "keypoint-seed", default_value_t = 0)]
-    pub seed: u64,
+    #[arg(long, default_value_t = 0)]
+    pub keypoint_seed: u64,
 }
 
 /// Writes synthetic keypoints (the default landmark map of its skeleton) into `capture`.
@@ -70,7 +70,7 @@ pub fn synthesize_keypoints(capture: &Capture, noise: &NoiseArgs) -> anyhow::Res
         sigma_px: noise.noise_px,
         drop_rate: noise.drop,
         swap_rate: noise.swap,
-        seed: noise.seed,
+        seed: noise.keypoint_seed,
     };
     let map = default_landmark_map(&capture.skeleton);
     write_synthetic_keypoints(capture, &map, &noise).context("writing synthetic keypoints")?;
