@@ -13,11 +13,11 @@
 //! heading search. MPJPE over all 24 joints, in cm.
 use std::time::Instant;
 
-use glam::{DMat4, DVec3, Mat4};
+use glam::{DVec3, Mat4};
 use skinfield_trainer::synth::character::build_skeleton;
 use skinfield_trainer::synth::motion::{TestMotions, library};
 use skinfield_trainer::synth::rig::camera_rig;
-use skinfield_trainer::track::capture::{default_landmark_map, landmarks_of};
+use skinfield_trainer::track::capture::{default_landmark_map, landmarks_of, mpjpe};
 use skinfield_trainer::track::synthetic::{BODY_25_PAIRS, DetectionNoise, detect, noise_rng};
 use skinfield_trainer::track::{FrameFit, Kinematics, Landmark, TrackOptions, Tracker};
 
@@ -44,7 +44,6 @@ fn main() {
     );
     println!("| --- | --- | --- | --- | --- | --- |");
     let mut worlds = vec![Mat4::IDENTITY; skeleton.len()];
-    let mut dworlds = vec![DMat4::IDENTITY; skeleton.len()];
     for (sigma, cams) in rows {
         let rig = camera_rig(cams, 256, 256, 1);
         let noise = DetectionNoise {
@@ -75,15 +74,10 @@ fn main() {
                 .filter(|(c, _)| *c == f.clip)
                 .map(|(_, p)| p);
             let fit = tracker.fit(&detections, prev).unwrap();
-            kin.world_matrices(fit.root_rotation, &fit.angles, &mut dworlds);
-            let err: f64 = dworlds
-                .iter()
-                .zip(&worlds)
-                .map(|(d, w)| {
-                    (d.w_axis.truncate() + fit.world_shift).distance(w.w_axis.truncate().as_dvec3())
-                })
-                .sum::<f64>()
-                / skeleton.len() as f64;
+            let tracked = kin
+                .pose(&skeleton, fit.root_rotation, fit.world_shift, &fit.angles)
+                .unwrap();
+            let err = mpjpe(&skeleton, &[tracked], std::slice::from_ref(&f.pose)).unwrap()[0];
             if verbose && err > 0.05 {
                 eprintln!(
                     "  σ {sigma} px, {cams} cameras: frame of clip {} MPJPE {:.2} cm, {:?}",

@@ -193,9 +193,7 @@ impl FastFrame {
         if mesh.options().base_influences > 0 {
             let mut entries = [Influence::default(); MAX_INFLUENCES];
             let len = self.base_weights(mesh, v, &mut entries);
-            for e in &entries[..len] {
-                out[e.index as usize] += e.weight;
-            }
+            scatter(&entries[..len], out);
         } else {
             for a in mesh.interp_of(v) {
                 let n = a.index as usize;
@@ -204,6 +202,13 @@ impl FastFrame {
                 }
             }
         }
+    }
+}
+
+/// Adds sparse `(joint, weight)` entries into dense weights `out`.
+fn scatter(entries: &[Influence], out: &mut [f32]) {
+    for e in entries {
+        out[e.index as usize] += e.weight;
     }
 }
 
@@ -295,6 +300,7 @@ impl FastSkinJob<'_> {
         let node_mats = nodes.node_matrices();
         let with_base = mesh.options().base_influences > 0;
         let mut entries = [Influence::default(); MAX_INFLUENCES];
+        let mut base_len = 0;
         for i in 0..self.out_positions.len() {
             let v = self.first_vertex + i;
             match self.method {
@@ -304,8 +310,8 @@ impl FastSkinJob<'_> {
                     // blended matrices give Σ_j w_vj M_j in `neighbours` blends.
                     let mut m = Mat4::ZERO;
                     if with_base {
-                        let len = nodes.base_weights(mesh, v, &mut entries);
-                        let base = entries[..len].iter();
+                        base_len = nodes.base_weights(mesh, v, &mut entries);
+                        let base = entries[..base_len].iter();
                         blend(
                             kernel,
                             &mut m,
@@ -349,7 +355,16 @@ impl FastSkinJob<'_> {
                 }
             }
             if let Some(o) = self.out_weights.as_deref_mut() {
-                nodes.dense_weights(mesh, v, &mut o[i * j..(i + 1) * j]);
+                // What the branch above formed is written, not formed a second time.
+                let o = &mut o[i * j..(i + 1) * j];
+                match self.method {
+                    Method::Dqs => o.copy_from_slice(dense),
+                    Method::Lbs if with_base => {
+                        o.fill(0.0);
+                        scatter(&entries[..base_len], o);
+                    }
+                    Method::Lbs => nodes.dense_weights(mesh, v, o),
+                }
             }
         }
         Ok(())
