@@ -40,6 +40,8 @@ enum Command {
     Zoo(cli::zoo::Args),
     /// Skeletal motion from the capture's 2D keypoints, written as a copy of the capture.
     Track(cli::track::Args),
+    /// Reconstruct the template (mesh, colours, part labels) from a capture frame's images.
+    Template(cli::template::Args),
     // Each subcommand: `Name(cli::name::Args)`, dispatched below to `cli::name::run`.
 }
 
@@ -61,6 +63,7 @@ fn main() {
         Command::Resample(args) => cli::resample::run(args),
         Command::Zoo(args) => cli::zoo::run(args),
         Command::Track(args) => cli::track::run(args),
+        Command::Template(args) => cli::template::run(args),
     };
     if let Err(e) = result {
         // One line: the context chain joined, so the file and the field are both named.

@@ -68,7 +68,7 @@ pub fn srgb_to_linear(x: f32) -> f32 {
     }
 }
 
-fn bad(path: &Path, reason: impl Into<String>) -> CaptureError {
+pub(super) fn bad(path: &Path, reason: impl Into<String>) -> CaptureError {
     CaptureError::BadFile {
         file: path.to_owned(),
         reason: reason.into(),
@@ -90,7 +90,11 @@ fn read_capped(path: &Path) -> Result<Vec<u8>, CaptureError> {
     std::fs::read(path).map_err(io)
 }
 
-fn decode_png(path: &Path, width: u32, height: u32) -> Result<image::DynamicImage, CaptureError> {
+pub(super) fn decode_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+) -> Result<image::DynamicImage, CaptureError> {
     let bytes = read_capped(path)?;
     let mut reader = image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Png);
     let mut limits = image::Limits::default();
@@ -234,16 +238,7 @@ pub fn write_image_png(
                 .map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8)
         })
         .collect();
-    let mut out = Vec::new();
-    image::ImageEncoder::write_image(
-        image::codecs::png::PngEncoder::new(&mut out),
-        &bytes,
-        width,
-        height,
-        image::ExtendedColorType::Rgb8,
-    )
-    .map_err(|e| bad(path, format!("PNG encoding failed: {e}")))?;
-    write_bytes(path, &out)
+    write_png(path, width, height, &bytes, image::ExtendedColorType::Rgb8)
 }
 
 /// Writes linear RGB pixels as a float EXR (atomically).
@@ -285,13 +280,24 @@ pub fn write_mask_png(
         .iter()
         .map(|&c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)
         .collect();
+    write_png(path, width, height, &bytes, image::ExtendedColorType::L8)
+}
+
+/// Encodes 8-bit pixels of `color` type as PNG and writes them atomically.
+pub(super) fn write_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    bytes: &[u8],
+    color: image::ExtendedColorType,
+) -> Result<(), CaptureError> {
     let mut out = Vec::new();
     image::ImageEncoder::write_image(
         image::codecs::png::PngEncoder::new(&mut out),
-        &bytes,
+        bytes,
         width,
         height,
-        image::ExtendedColorType::L8,
+        color,
     )
     .map_err(|e| bad(path, format!("PNG encoding failed: {e}")))?;
     write_bytes(path, &out)

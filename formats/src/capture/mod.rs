@@ -16,6 +16,8 @@
 //!   images/{camera}/{frame:05}.png  RGB, sRGB-encoded 8-bit (or .exr: linear float RGB)
 //!   masks/{camera}/{frame:05}.png   8-bit grey, foreground > 127
 //!   keypoints/…                   optional 2D detections in OpenPose JSON ([`keypoints`])
+//!   labels/{camera}/{frame:05}.png  optional part labels, 8-bit RGB, one palette colour per part
+//!                                 (manifest `labels`: folder, palette, frames)
 //!   eval/true_weights.json        EVALUATION ONLY: the ground-truth deformer's static weights
 //!   eval/gt/{frame:05}.bin        EVALUATION ONLY: ground-truth posed positions of a test frame
 //!                                 (b"SFGTMESH", u32 LE version 1, u32 LE vertex count, then
@@ -24,7 +26,8 @@
 //!
 //! The manifest lists the cameras (OpenCV pinhole: resolution, `fx fy cx cy`, Brown–Conrady
 //! distortion, world-to-camera rotation rows and translation), the named clips of the motion,
-//! and the train and test frame indices (disjoint). [`load_capture`] reads the manifest, the
+//! and the train and test frame indices (disjoint), and optionally the canonical frame a template
+//! is reconstructed from (`canonical_frame`, which may be neither). [`load_capture`] reads the manifest, the
 //! template, the skeleton, the motion and the initial weights eagerly and validates all of it
 //! (sizes, indices, finiteness, that every image and mask file exists); images, masks and the
 //! evaluation files are read lazily. Every error names the file and the field that is wrong.
@@ -45,6 +48,7 @@ use crate::skin::StaticSkin;
 mod convert;
 mod images;
 pub mod keypoints;
+mod labels;
 mod schema;
 mod write;
 
@@ -54,9 +58,12 @@ pub use images::{
     read_mask, srgb_to_linear, write_gt_positions, write_image_exr, write_image_png,
     write_mask_png,
 };
+pub use labels::{
+    LabelImage, MAX_PARTS, NO_LABEL, read_labels, validate_palette, write_labels_png,
+};
 pub use schema::{
     CameraEntry, CaptureManifest, ClipEntry, DofsEntry, EvaluationEntry, ImageFormat, JointEntry,
-    MotionFile, SkeletonEntry, SkinFile, SourceEntry, TemplateFile,
+    LabelsEntry, MotionFile, SkeletonEntry, SkinFile, SourceEntry, TemplateFile,
 };
 pub use write::{CaptureWriter, skeleton_to_entry, skin_to_file, template_to_file};
 
@@ -215,6 +222,51 @@ impl Capture {
         images::read_mask(&self.mask_path(cam, frame), c.width, c.height)
     }
 
+    /// The frame a template is reconstructed from: the manifest's `canonical_frame`, else the
+    /// first training frame.
+    #[must_use]
+    pub fn canonical_frame(&self) -> usize {
+        self.manifest
+            .canonical_frame
+            .unwrap_or(self.train_frames[0])
+    }
+
+    /// Path of the part-label image of camera `cam` at `frame`, if the capture has labels.
+    #[must_use]
+    pub fn label_path(&self, cam: usize, frame: usize) -> Option<PathBuf> {
+        let entry = self.manifest.labels.as_ref()?;
+        Some(frame_file(
+            &self.dir,
+            &entry.folder,
+            &self.rig.cameras[cam].name,
+            frame,
+            ImageFormat::Png,
+        ))
+    }
+
+    /// Reads the part labels of camera `cam` at `frame`; `Ok(None)` when the capture has no
+    /// labels, an error when it has them but not for this frame.
+    pub fn load_labels(
+        &self,
+        cam: usize,
+        frame: usize,
+    ) -> Result<Option<LabelImage>, CaptureError> {
+        self.check_index(cam, frame)?;
+        let Some(entry) = &self.manifest.labels else {
+            return Ok(None);
+        };
+        if !entry.frames.contains(&frame) {
+            return Err(CaptureError::invalid(
+                &self.dir.join(MANIFEST_FILE),
+                "labels.frames",
+                format!("frame {frame} has no label images"),
+            ));
+        }
+        let c = &self.rig.cameras[cam];
+        let path = self.label_path(cam, frame).unwrap_or_default();
+        labels::read_labels(&path, c.width, c.height, entry).map(Some)
+    }
+
     /// EVALUATION ONLY — the trainer must never call this. Ground-truth posed vertex positions
     /// of test frame `frame` (same vertex order and triangles as [`Capture::template`]); also of
     /// a training frame when the capture has its file (synthetic captures write every frame's,
@@ -224,11 +276,14 @@ impl Capture {
         let eval = self.manifest.evaluation.as_ref().ok_or_else(|| {
             CaptureError::invalid(&manifest_file, "evaluation", "capture has no ground truth")
         })?;
-        if !self.test_frames.contains(&frame) && !self.train_frames.contains(&frame) {
+        if !self.test_frames.contains(&frame)
+            && !self.train_frames.contains(&frame)
+            && self.manifest.canonical_frame != Some(frame)
+        {
             return Err(CaptureError::invalid(
                 &manifest_file,
                 "test_frames",
-                format!("frame {frame} is neither a test nor a training frame"),
+                format!("frame {frame} is neither a test, a training nor the canonical frame"),
             ));
         }
         let path = self
@@ -415,6 +470,20 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
     if let Some(rel) = &m.keypoints {
         check_relative(&mfile, "keypoints", rel)?;
     }
+    if let Some(l) = &m.labels {
+        check_relative(&mfile, "labels.folder", &l.folder)?;
+        validate_palette(&mfile, "labels.palette", &l.palette)?;
+        check_frames(&mfile, "labels.frames", &l.frames, m.frame_count)?;
+    }
+    if let Some(f) = m.canonical_frame
+        && f >= m.frame_count
+    {
+        return Err(CaptureError::invalid(
+            &mfile,
+            "canonical_frame",
+            format!("frame {f} >= frame_count {}", m.frame_count),
+        ));
+    }
     if let Some(e) = &m.evaluation {
         check_relative(&mfile, "evaluation.gt_meshes", &e.gt_meshes)?;
         if let Some(rel) = &e.true_weights {
@@ -501,17 +570,24 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
         .train_frames
         .iter()
         .chain(&capture.test_frames)
+        .chain(&capture.manifest.canonical_frame)
         .copied()
         .collect();
+    let labelled = capture.manifest.labels.as_ref().map(|l| l.frames.clone());
     for cam in 0..capture.rig.cameras.len() {
-        for &f in &used {
-            for path in [capture.image_path(cam, f), capture.mask_path(cam, f)] {
-                if !path.is_file() {
-                    return Err(CaptureError::BadFile {
-                        file: path,
-                        reason: "missing (listed by manifest.json)".into(),
-                    });
-                }
+        let images = used
+            .iter()
+            .flat_map(|&f| [capture.image_path(cam, f), capture.mask_path(cam, f)]);
+        let labels = labelled
+            .iter()
+            .flatten()
+            .filter_map(|&f| capture.label_path(cam, f));
+        for path in images.chain(labels) {
+            if !path.is_file() {
+                return Err(CaptureError::BadFile {
+                    file: path,
+                    reason: "missing (listed by manifest.json)".into(),
+                });
             }
         }
     }

@@ -63,6 +63,14 @@ pub struct CaptureManifest {
     /// Folder of 2D keypoint detections ([`super::keypoints`]), if the capture has them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub keypoints: Option<String>,
+    /// Per-view part-label images ([`LabelsEntry`]), if the capture has them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub labels: Option<LabelsEntry>,
+    /// The frame a template is reconstructed from (`trainer template`): typically the actor's
+    /// calibration pose at the start of the recording. It may be outside the training and test
+    /// frames; its images and masks must exist.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub canonical_frame: Option<usize>,
     /// Ground truth for evaluation only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub evaluation: Option<EvaluationEntry>,
@@ -96,6 +104,21 @@ pub struct CameraEntry {
     pub rotation: [[f32; 3]; 3],
     /// World-to-camera translation.
     pub translation: [f32; 3],
+}
+
+/// Per-view part-label images: `{folder}/{camera}/{frame:05}.png`, 8-bit RGB, one colour per
+/// part (2D human parsing, or the synthetic ground truth). A pixel whose colour is not in the
+/// palette (the background, an anti-aliased edge) has no label.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LabelsEntry {
+    /// Folder of the label images.
+    pub folder: String,
+    /// Colour of each part label, indexed by the template's part label (0 = skin, 1 =
+    /// clothing); 1 to 254 distinct colours.
+    pub palette: Vec<[u8; 3]>,
+    /// Frames that have label images (each must exist for every camera).
+    pub frames: Vec<usize>,
 }
 
 /// A named range of frames.

@@ -83,6 +83,12 @@ fn manifest(format: ImageFormat) -> CaptureManifest {
         masks: "masks".into(),
         image_format: format,
         keypoints: None,
+        labels: Some(LabelsEntry {
+            folder: "labels".into(),
+            palette: vec![[200, 10, 10], [10, 10, 200]],
+            frames: vec![0],
+        }),
+        canonical_frame: None,
         evaluation: Some(EvaluationEntry {
             gt_meshes: "eval/gt".into(),
             true_weights: Some("eval/true_weights.json".into()),
@@ -101,6 +107,11 @@ fn pixels(frame: usize, cam: usize) -> (Vec<Vec3>, Vec<f32>) {
         .map(|i| ((i * 7 + frame * 3 + cam * 5) % 18) as f32 / 17.0)
         .collect();
     (rgb, mask)
+}
+
+/// Part labels of camera `cam` (a 8 × 6 image): background, skin and clothing.
+fn label_pixels(cam: usize) -> Vec<u8> {
+    (0..48).map(|i| [NO_LABEL, 0, 1][(i + cam) % 3]).collect()
 }
 
 fn write_capture(dir: &Path, format: ImageFormat) -> (Vec<Pose>, StaticSkin, Vec<Vec3>) {
@@ -133,6 +144,9 @@ fn write_capture(dir: &Path, format: ImageFormat) -> (Vec<Pose>, StaticSkin, Vec
             w.write_image(c, f, &rgb).unwrap();
             w.write_mask(c, f, &mask).unwrap();
         }
+    }
+    for c in 0..2 {
+        w.write_labels(c, 0, &label_pixels(c)).unwrap();
     }
     w.finish().unwrap();
     (poses, skin, gt)
@@ -269,6 +283,30 @@ fn errors_name_the_file_and_field() {
             Box::new(|v| v["clips"][0]["count"] = 9.into()),
         ),
         (
+            "manifest.json",
+            "manifest.json",
+            "labels.palette[1]",
+            Box::new(|v| v["labels"]["palette"][1] = serde_json::json!([200, 10, 10])),
+        ),
+        (
+            "manifest.json",
+            "manifest.json",
+            "labels.frames[0]",
+            Box::new(|v| v["labels"]["frames"][0] = 3.into()),
+        ),
+        (
+            "manifest.json",
+            "manifest.json",
+            "labels.folder",
+            Box::new(|v| v["labels"]["folder"] = "/abs".into()),
+        ),
+        (
+            "manifest.json",
+            "manifest.json",
+            "canonical_frame",
+            Box::new(|v| v["canonical_frame"] = 3.into()),
+        ),
+        (
             "template.json",
             "template.json",
             "mesh",
@@ -323,6 +361,44 @@ fn errors_name_the_file_and_field() {
         edit_json(&tmp.path().join(target), |v| edit(v));
         expect_invalid(tmp.path(), file, field);
     }
+}
+
+#[test]
+fn labels_and_the_canonical_frame_load_and_missing_ones_are_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    write_capture(tmp.path(), ImageFormat::Png);
+    let c = load_capture(tmp.path()).unwrap();
+    assert_eq!(
+        c.canonical_frame(),
+        0,
+        "the first training frame by default"
+    );
+    for cam in 0..2 {
+        let l = c.load_labels(cam, 0).unwrap().unwrap();
+        assert_eq!(l.labels, label_pixels(cam));
+    }
+    let e = c.load_labels(0, 1).unwrap_err();
+    assert!(e.to_string().contains("labels.frames"), "{e}");
+    // A label file the manifest lists must exist.
+    let label = tmp.path().join("labels/cam1/00000.png");
+    std::fs::remove_file(&label).unwrap();
+    assert!(
+        matches!(load_capture(tmp.path()), Err(CaptureError::BadFile { file, .. }) if file == label)
+    );
+    // The canonical frame may be outside the train and test frames, but its images must exist.
+    let tmp = tempfile::tempdir().unwrap();
+    write_capture(tmp.path(), ImageFormat::Png);
+    edit_json(&tmp.path().join("manifest.json"), |v| {
+        v["train_frames"] = serde_json::json!([0]);
+        v["canonical_frame"] = 1.into();
+    });
+    let c = load_capture(tmp.path()).unwrap();
+    assert_eq!(c.canonical_frame(), 1);
+    let mask = tmp.path().join("masks/cam0/00001.png");
+    std::fs::remove_file(&mask).unwrap();
+    assert!(
+        matches!(load_capture(tmp.path()), Err(CaptureError::BadFile { file, .. }) if file == mask)
+    );
 }
 
 #[test]

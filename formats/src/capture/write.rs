@@ -235,6 +235,34 @@ impl CaptureWriter {
         images::write_mask_png(&path, c.width, c.height, coverage)
     }
 
+    /// Writes the part labels of camera `cam` at `frame` (indices into the manifest's
+    /// `labels.palette`, [`super::NO_LABEL`] for the background).
+    pub fn write_labels(
+        &self,
+        cam: usize,
+        frame: usize,
+        labels: &[u8],
+    ) -> Result<(), CaptureError> {
+        let c = self
+            .manifest
+            .cameras
+            .get(cam)
+            .ok_or_else(|| self.missing("cameras"))?;
+        let entry = self
+            .manifest
+            .labels
+            .as_ref()
+            .ok_or_else(|| self.missing("labels"))?;
+        let path = frame_file(
+            &self.dir,
+            &entry.folder,
+            &c.name,
+            frame,
+            super::ImageFormat::Png,
+        );
+        super::labels::write_labels_png(&path, c.width, c.height, labels, &entry.palette)
+    }
+
     /// Writes `manifest.json` (pretty-printed) and returns its path.
     pub fn finish(self) -> Result<PathBuf, CaptureError> {
         let path = self.dir.join(MANIFEST_FILE);

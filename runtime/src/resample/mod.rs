@@ -29,7 +29,7 @@ use skinfield_formats::SkinError;
 use skinfield_formats::Template;
 use skinfield_formats::mesh::MeshError;
 
-pub use simplify::{simplify, simplify_subset};
+pub use simplify::{simplify, simplify_subset, simplify_subset_locked};
 pub use subdivide::subdivide;
 pub use transfer::{SourcePoint, transfer_attributes, transfer_skin};
 

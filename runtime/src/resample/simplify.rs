@@ -30,6 +30,19 @@ pub fn simplify_subset(
     triangles: &[[u32; 3]],
     target: Target,
 ) -> (Vec<u32>, Vec<[u32; 3]>) {
+    simplify_subset_locked(positions, triangles, target, &[])
+}
+
+/// [`simplify_subset`] that never moves or removes the vertices flagged in `locked`: one flag
+/// per input vertex; an empty slice (or one of another length) locks nothing and is exactly
+/// [`simplify_subset`].
+#[must_use]
+pub fn simplify_subset_locked(
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    target: Target,
+    locked: &[bool],
+) -> (Vec<u32>, Vec<[u32; 3]>) {
     let indices: Vec<u32> = triangles.iter().flatten().copied().collect();
     let bytes: Vec<u8> = positions
         .iter()
@@ -40,15 +53,29 @@ pub fn simplify_subset(
     let Ok(adapter) = meshopt::VertexDataAdapter::new(&bytes, 12, 0) else {
         return compact(positions.len(), &indices);
     };
+    let locks = locked.len() == positions.len() && locked.contains(&true);
     let pass = |target_indices: usize| {
-        let out = meshopt::simplify(
-            &indices,
-            &adapter,
-            target_indices.min(indices.len()),
-            NO_ERROR_LIMIT,
-            meshopt::SimplifyOptions::None,
-            None,
-        );
+        let target_indices = target_indices.min(indices.len());
+        let out = if locks {
+            meshopt::simplify_with_locks(
+                &indices,
+                &adapter,
+                locked,
+                target_indices,
+                NO_ERROR_LIMIT,
+                meshopt::SimplifyOptions::None,
+                None,
+            )
+        } else {
+            meshopt::simplify(
+                &indices,
+                &adapter,
+                target_indices,
+                NO_ERROR_LIMIT,
+                meshopt::SimplifyOptions::None,
+                None,
+            )
+        };
         compact(positions.len(), &out)
     };
     match target {

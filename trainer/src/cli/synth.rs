@@ -57,6 +57,10 @@ pub struct Args {
     /// `--test-motions held-out-phases`.
     #[arg(long, value_delimiter = ',', requires = "character")]
     pub test_clips: Vec<String>,
+    /// Share of the part-label images' boundary pixels that take a neighbouring part's label
+    /// (what a human-parsing network gets wrong), 0 to 1.
+    #[arg(long, default_value_t = 0.0)]
+    pub label_noise: f32,
     /// Also write 2D keypoint detections (OpenPose JSON) projected from the motion, for
     /// `trainer track`.
     #[arg(long)]
@@ -94,6 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             TestMotionsArg::Novel => TestMotions::Novel,
             TestMotionsArg::HeldOutPhases => TestMotions::HeldOutPhases,
         },
+        label_noise: args.label_noise,
         seed: args.seed,
         ..SynthConfig::default()
     };

@@ -5,7 +5,7 @@
 //! (as `trainer synth --keypoints` does).
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
@@ -83,29 +83,6 @@ pub fn synthesize_keypoints(capture: &Capture, noise: &NoiseArgs) -> anyhow::Res
     Ok(())
 }
 
-/// Copies every file of `from` into `to` (hard links where the file system allows), except the
-/// manifest and the motion, which the caller writes.
-fn copy_tree(from: &Path, to: &Path, skip: &[PathBuf]) -> anyhow::Result<()> {
-    std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
-    for entry in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
-        let entry = entry?;
-        let (src, dst) = (entry.path(), to.join(entry.file_name()));
-        if skip.contains(&src) {
-            continue;
-        }
-        if entry.file_type()?.is_dir() {
-            copy_tree(&src, &dst, skip)?;
-        } else {
-            let _ = std::fs::remove_file(&dst);
-            if std::fs::hard_link(&src, &dst).is_err() {
-                std::fs::copy(&src, &dst)
-                    .with_context(|| format!("copying {} to {}", src.display(), dst.display()))?;
-            }
-        }
-    }
-    Ok(())
-}
-
 /// Runs `trainer track`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let load = || {
@@ -139,7 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let seconds = start.elapsed().as_secs_f64();
 
     let motion_path = capture.dir.join(&capture.manifest.motion);
-    copy_tree(
+    super::copy_tree(
         &capture.dir,
         &args.out,
         &[capture.dir.join(MANIFEST_FILE), motion_path],

@@ -63,6 +63,7 @@ pub mod distance;
 pub mod fast;
 pub mod figure;
 pub mod posing;
+pub mod reconstruction;
 pub mod spread;
 pub mod static_weights;
 pub mod surface;
@@ -463,6 +464,9 @@ pub fn evaluate_mesh_frames(
             capture.dir.join(skinfield_formats::capture::MANIFEST_FILE),
         ));
     }
+    // Vertex i of the posed mesh is vertex i of the truth only for the capture's own mesh; another
+    // template (resampled, reconstructed) may have the same count by chance.
+    let corresponds = triangles == capture.template.triangles.as_slice();
     let mut out = Vec::with_capacity(capture.test_frames.len());
     for &frame in &capture.test_frames {
         let truth = capture.evaluation_gt_mesh(frame)?;
@@ -484,7 +488,9 @@ pub fn evaluate_mesh_frames(
             frame,
             m2s_cm: m.m2s * 100.0,
             s2m_cm: m.s2m * 100.0,
-            max_vertex_cm: max_vertex_distance(&posed, &truth).map(|d| d * 100.0),
+            max_vertex_cm: max_vertex_distance(&posed, &truth)
+                .filter(|_| corresponds)
+                .map(|d| d * 100.0),
         });
     }
     Ok(out)

@@ -46,6 +46,19 @@ fn a_subdivided_template_scores_like_the_original_surface_and_a_coarse_one_does_
     let loaded = load_template(&file).unwrap();
     assert_eq!(loaded.triangles, fine.triangles);
     assert_eq!(loaded.positions, fine.positions);
+    // A mesh with as many vertices as the template but another vertex order has no vertex
+    // correspondence with the truth: no worst-vertex figure.
+    assert!(original.max_vertex_cm.is_some());
+    let mut shuffled = capture.template.clone();
+    shuffled.positions.reverse();
+    shuffled.normals.reverse();
+    let last = (n - 1) as u32;
+    for t in &mut shuffled.triangles {
+        *t = t.map(|i| last - i);
+    }
+    let same = evaluate_template(&capture, &shuffled, &skinning, &OPTIONS).unwrap();
+    assert_eq!(same.max_vertex_cm, None);
+    assert!((same.chamfer_cm - original.chamfer_cm).abs() < 0.02 * original.chamfer_cm);
     let coarse = resample(&capture.template, Target::Vertices(60))
         .unwrap()
         .template;

@@ -9,7 +9,7 @@ use skinfield_formats::{PartLabel, Template};
 use skinfield_runtime::resample::{Target, simplify_subset};
 
 use super::character::segment_distance;
-use super::marching::marching_tetrahedra;
+use crate::marching::marching_tetrahedra;
 
 /// What a vertex of the built-in character belongs to (finer than [`PartLabel`]: colours and
 /// the skirt push-out use it).

@@ -17,7 +17,7 @@ pub mod character;
 pub mod deform;
 pub mod gltf_character;
 pub mod gltf_source;
-mod marching;
+pub mod labels;
 pub mod motion;
 pub mod output;
 pub mod rig;
@@ -78,6 +78,9 @@ pub struct SynthConfig {
     /// Which poses the test frames hold (the novel test clips, or held-out phases of the
     /// training clips).
     pub test_motions: TestMotions,
+    /// Share of the part-label images' boundary pixels given a neighbouring part's label
+    /// ([`labels::with_boundary_noise`]); 0 writes exact labels.
+    pub label_noise: f32,
     /// Seed of every random choice (colour noise, motion amplitudes, camera jitter).
     pub seed: u64,
 }
@@ -95,6 +98,7 @@ impl Default for SynthConfig {
             shadow_map: 512,
             image_format: ImageFormat::Png,
             test_motions: TestMotions::Novel,
+            label_noise: 0.0,
             seed: 0,
         }
     }
@@ -115,6 +119,7 @@ impl SynthConfig {
             shadow_map: 96,
             image_format: ImageFormat::Png,
             test_motions: TestMotions::Novel,
+            label_noise: 0.0,
             seed: 0,
         }
     }
@@ -149,6 +154,9 @@ impl SynthConfig {
         }
         if !(1000..=200_000).contains(&self.target_vertices) {
             return bad("target_vertices", "must be 1000 to 200000");
+        }
+        if !(0.0..=1.0).contains(&self.label_noise) {
+            return bad("label_noise", "must be in [0, 1]");
         }
         if !(16..=4096).contains(&self.shadow_map) {
             return bad("shadow_map", "must be 16 to 4096 texels");

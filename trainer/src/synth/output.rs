@@ -1,6 +1,8 @@
 //! Writing a synthetic capture: pose every frame with the ground-truth deformer, render every
 //! camera (Lambert + specular, shadows from a directional light), and write images, masks,
-//! motion, template, the evaluation-only ground truth and finally the manifest.
+//! motion, template, part-label images, the evaluation-only ground truth and finally the
+//! manifest. After the clips comes one more frame, the canonical frame: the bind pose, from
+//! which `trainer template` reconstructs a template (neither a training nor a test frame).
 
 use std::path::Path;
 use std::time::Instant;
@@ -9,11 +11,12 @@ use glam::Vec3;
 use rayon::prelude::*;
 use skinfield_formats::capture::{
     CAPTURE_FORMAT, CAPTURE_VERSION, CameraEntry, CaptureManifest, CaptureWriter, ClipEntry,
-    EvaluationEntry, SourceEntry,
+    EvaluationEntry, LabelsEntry, SourceEntry,
 };
 use skinfield_formats::{Camera, CameraRig, Pose, Skeleton, Template};
 
 use super::deform::GroundTruthDeformer;
+use super::labels::{PART_PALETTE, render_labels, with_boundary_noise};
 use super::motion::{CLIPS, Split, library};
 use super::rig::camera_rig;
 use super::{SynthConfig, SynthError, build_character};
@@ -172,6 +175,23 @@ pub fn write_subject(
             test.push(f)
         }
     }
+    // The canonical frame: the bind pose, after the clips, as a capture starts with the actor
+    // in a calibration pose; `trainer template` reconstructs the template from it.
+    let canonical = subject.frames.len();
+    clips.push(ClipEntry {
+        name: "canonical".into(),
+        first: canonical,
+        count: 1,
+        split: "canonical".into(),
+    });
+    let bind_pose = subject.skeleton.bind_pose();
+    let frame_poses: Vec<&Pose> = subject
+        .frames
+        .iter()
+        .map(|f| &f.2)
+        .chain([&bind_pose])
+        .collect();
+    let parts = subject.template.part_labels.as_deref();
     let manifest = CaptureManifest {
         format: CAPTURE_FORMAT.into(),
         version: CAPTURE_VERSION,
@@ -180,7 +200,7 @@ pub fn write_subject(
         template: "template.json".into(),
         motion: "motion.json".into(),
         initial_weights: None,
-        frame_count: subject.frames.len(),
+        frame_count: frame_poses.len(),
         clips,
         train_frames: train.clone(),
         test_frames: test.clone(),
@@ -188,6 +208,12 @@ pub fn write_subject(
         masks: "masks".into(),
         image_format: config.image_format,
         keypoints: None,
+        labels: parts.map(|_| LabelsEntry {
+            folder: "labels".into(),
+            palette: PART_PALETTE.to_vec(),
+            frames: (0..frame_poses.len()).collect(),
+        }),
+        canonical_frame: Some(canonical),
         evaluation: Some(EvaluationEntry {
             gt_meshes: "eval/gt".into(),
             true_weights: Some("eval/true_weights.json".into()),
@@ -203,17 +229,15 @@ pub fn write_subject(
     let writer = CaptureWriter::new(dir, manifest)?;
     writer.write_template(subject.template, subject.skeleton)?;
     writer.write_motion(
-        &subject
-            .frames
-            .iter()
-            .map(|f| f.2.clone())
-            .collect::<Vec<_>>(),
+        &frame_poses.iter().map(|&p| p.clone()).collect::<Vec<_>>(),
         FPS,
     )?;
     writer.write_true_weights(subject.deformer.skin())?;
 
-    subject.frames.par_iter().enumerate().try_for_each(
-        |(f, (_, _, pose))| -> Result<(), SynthError> {
+    frame_poses
+        .par_iter()
+        .enumerate()
+        .try_for_each(|(f, &pose)| -> Result<(), SynthError> {
             let (positions, normals) = subject.deformer.deform(pose)?;
             let shadow = ShadowMap::build(
                 light.direction,
@@ -232,12 +256,19 @@ pub fn write_subject(
                 );
                 writer.write_image(c, f, &rgb)?;
                 writer.write_mask(c, f, &mask)?;
+                if let Some(parts) = parts {
+                    let labels =
+                        render_labels(camera, &positions, &subject.template.triangles, parts);
+                    let seed = config.seed ^ ((f as u64) << 32 | c as u64);
+                    let (w, h) = (camera.width as usize, camera.height as usize);
+                    let labels = with_boundary_noise(&labels, w, h, config.label_noise, seed);
+                    writer.write_labels(c, f, &labels)?;
+                }
             }
             // Every frame's ground truth (evaluation only: the bounds fit the training frames').
             writer.write_gt_mesh(f, &positions)?;
             Ok(())
-        },
-    )?;
+        })?;
     writer.finish()?;
     Ok(SynthSummary {
         vertices: subject.template.vertex_count(),

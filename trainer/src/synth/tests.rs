@@ -2,7 +2,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use glam::{Mat4, Quat, Vec3};
-use skinfield_formats::capture::load_capture;
+use skinfield_formats::capture::{NO_LABEL, load_capture};
 
 use super::body::Part;
 use super::character::{bind_positions, joint};
@@ -105,6 +105,26 @@ fn synthetic_capture_loads_back_with_everything_in_place() {
         let gt = cap.evaluation_gt_mesh(f).unwrap();
         let (want, _) = character.deformer.deform(&cap.poses[f]).unwrap();
         assert_eq!(gt, want);
+    }
+    // The canonical frame is the bind pose, whose ground truth is the template itself.
+    let canonical = cap.canonical_frame();
+    assert_eq!(canonical, cap.frame_count() - 1);
+    assert_eq!(
+        cap.evaluation_gt_mesh(canonical).unwrap(),
+        cap.template.positions
+    );
+    // Label images: a part wherever the subject fully covers a pixel, none where it is absent,
+    // and both parts seen.
+    for cam in 0..2 {
+        let labels = cap.load_labels(cam, canonical).unwrap().unwrap();
+        let mask = cap.load_mask(cam, canonical).unwrap();
+        for (l, c) in labels.labels.iter().zip(&mask.coverage) {
+            assert!(
+                (*c < 1.0 || *l != NO_LABEL) && (*c > 0.0 || *l == NO_LABEL),
+                "label {l} at coverage {c}"
+            );
+        }
+        assert!((0..2).all(|part| labels.labels.contains(&part)));
     }
     // Images carry the subject where the mask says so, and the background elsewhere. The mask
     // holds coverage from 4 × 4 samples and the image one sample per pixel, so only fully
@@ -524,7 +544,11 @@ fn gltf_held_out_phases_test_the_training_clip_between_its_frames() {
         .collect();
     assert_eq!(
         names,
-        [("animation_0", "train"), ("animation_0_heldout", "test")]
+        [
+            ("animation_0", "train"),
+            ("animation_0_heldout", "test"),
+            ("canonical", "canonical")
+        ]
     );
     // Training frames at (i + ½)/4 of the clip; held-out ones at 1/4 and 3/4, midway between
     // training frames 0–1 and 2–3: poses of the clip that training never sees.
@@ -540,7 +564,10 @@ fn gltf_held_out_phases_test_the_training_clip_between_its_frames() {
         at(0.25),
         at(0.75),
     ];
-    assert_eq!(cap.poses.len(), want.len());
+    // Then the canonical frame, in the bind pose.
+    assert_eq!(cap.poses.len(), want.len() + 1);
+    assert_eq!(cap.manifest.canonical_frame, Some(want.len()));
+    assert_eq!(cap.poses[want.len()], cap.skeleton.bind_pose());
     for (f, (got, want)) in cap.poses.iter().zip(&want).enumerate() {
         assert_eq!(got, want, "frame {f}");
     }
