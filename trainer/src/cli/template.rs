@@ -133,13 +133,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
-        "frame {} from {} cameras: {} vertices ({} marched, cell {:.2} cm), {}closed, Euler \
-         characteristic {}, {} unseen vertices{}",
+        "frame {} from {} cameras: {} vertices ({} marched, cell {:.2} cm, {} simplification \
+         passes), {}closed, Euler characteristic {}, {} unseen vertices{}",
         rep.frame,
         rep.cameras.len(),
         r.template.vertex_count(),
         rep.marched_vertices,
         rep.cell * 100.0,
+        rep.simplify_passes,
         if rep.closed { "" } else { "NOT " },
         rep.euler_characteristic,
         rep.unseen_vertices,

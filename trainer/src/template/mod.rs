@@ -135,6 +135,8 @@ pub struct TemplateReport {
     pub cell: f32,
     /// Vertices marching produced (before simplification).
     pub marched_vertices: usize,
+    /// Simplification passes until the mesh was closed (see [`SIMPLIFY_ATTEMPTS`]).
+    pub simplify_passes: usize,
     /// Whether the final mesh is closed and consistently oriented.
     pub closed: bool,
     /// Euler characteristic of the final mesh (2 for a sphere-like surface).
@@ -160,13 +162,14 @@ pub struct Reconstruction {
 
 /// A closed mesh of the visual hull of `views`, searched inside `search`: `resolution` cells
 /// along the longest side of the occupied box, simplified to about `vertices`. Returns the
-/// template (positions, normals, triangles), the cell size and the marched vertex count.
+/// template (positions, normals, triangles), the cell size, the marched vertex count and the
+/// simplification passes.
 pub fn reconstruct_surface(
     views: &[HullView],
     search: (Vec3, Vec3),
     resolution: usize,
     vertices: usize,
-) -> Option<(Template, f32, usize)> {
+) -> Option<(Template, f32, usize, usize)> {
     let (min, max) = occupied_box(views, search, COARSE_SAMPLES)?;
     let cell = (max - min).max_element() / resolution as f32;
     let (positions, triangles) = mesh_hull(views, min, max, cell);
@@ -175,7 +178,8 @@ pub fn reconstruct_surface(
         return None;
     }
     let marched = positions.len();
-    let (positions, triangles) = simplify_closed(&positions, &triangles, vertices, 3.0 * cell);
+    let (positions, triangles, passes) =
+        simplify_closed(&positions, &triangles, vertices, 3.0 * cell);
     let normals = area_weighted_normals(&positions, &triangles);
     let template = Template {
         positions,
@@ -185,7 +189,7 @@ pub fn reconstruct_surface(
         colors: None,
         part_labels: None,
     };
-    Some((template, cell, marched))
+    Some((template, cell, marched, passes))
 }
 
 /// Simplification attempts before a mesh that is not closed is accepted.
@@ -202,10 +206,12 @@ fn simplify_closed(
     triangles: &[[u32; 3]],
     vertices: usize,
     radius: f32,
-) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+) -> (Vec<Vec3>, Vec<[u32; 3]>, usize) {
     let mut locked = vec![false; positions.len()];
     let mut result = (Vec::new(), Vec::new());
+    let mut passes = 0;
     for _ in 0..SIMPLIFY_ATTEMPTS {
+        passes += 1;
         let (source, simplified) =
             simplify_subset_locked(positions, triangles, Target::Vertices(vertices), &locked);
         let pinched = clean::unpaired_edge_vertices(&simplified);
@@ -223,7 +229,7 @@ fn simplify_closed(
                 .any(|c| c.distance_squared(*p) < radius * radius);
         }
     }
-    result
+    (result.0, result.1, passes)
 }
 
 /// Gives `template` (posed as in `frame`) vertex colours from the images of `cameras` at
@@ -363,7 +369,7 @@ pub fn reconstruct(
     // diagonal beyond them on every side, at least a metre-scale margin for a one-joint rig.
     let margin = 0.5 * (hi - lo).length().max(1e-3);
     let start = Instant::now();
-    let (mut template, cell, marched) = reconstruct_surface(
+    let (mut template, cell, marched, simplify_passes) = reconstruct_surface(
         &views,
         (lo - margin, hi + margin),
         options.resolution,
@@ -396,6 +402,7 @@ pub fn reconstruct(
         cameras,
         cell,
         marched_vertices: marched,
+        simplify_passes,
         closed: clean::is_closed(&template.triangles),
         euler_characteristic: clean::euler_characteristic(&template.triangles),
         unseen_vertices,

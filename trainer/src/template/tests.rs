@@ -53,7 +53,7 @@ fn reconstruct_shape(sdf: impl Fn(Vec3) -> f32 + Sync, extent: f32) -> (f32, f32
         })
         .collect();
     let search = (Vec3::splat(-2.0 * extent), Vec3::splat(2.0 * extent));
-    let (template, _cell, _) = reconstruct_surface(&views, search, 96, 4000).unwrap();
+    let (template, _, _, _) = reconstruct_surface(&views, search, 96, 4000).unwrap();
     let m2s = template
         .positions
         .iter()
