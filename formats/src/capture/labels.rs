@@ -141,6 +141,31 @@ mod tests {
     }
 
     #[test]
+    fn every_truncated_prefix_of_a_label_image_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("l.png");
+        let labels: Vec<u8> = (0..48).map(|i| [0, 1, NO_LABEL][i % 3]).collect();
+        write_labels_png(&path, 8, 6, &labels, &entry().palette).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let cut = dir.path().join("cut.png");
+        // The last 12 bytes are the empty IEND chunk: the decoder has every pixel without it.
+        for n in 0..bytes.len() {
+            std::fs::write(&cut, &bytes[..n]).unwrap();
+            match read_labels(&cut, 8, 6, &entry()) {
+                Err(e) => assert!(e.to_string().contains("cut.png"), "{n} bytes: {e}"),
+                Ok(read) => {
+                    assert!(
+                        n >= bytes.len() - 12,
+                        "{n} of {} bytes decoded",
+                        bytes.len()
+                    );
+                    assert_eq!(read.labels, labels);
+                }
+            }
+        }
+    }
+
+    #[test]
     fn bad_palettes_sizes_and_labels_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("l.png");
