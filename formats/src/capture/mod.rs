@@ -11,7 +11,9 @@
 //!                                 optional colours / uvs / part labels) and the skeleton
 //!                                 (names, parents, bind-pose local TRS, joint-angle DOFs, base)
 //!   motion.json                   MotionFile: one Pose per frame (10 numbers per joint:
-//!                                 translation xyz, rotation quaternion xyzw, scale xyz)
+//!                                 translation xyz, rotation quaternion xyzw, scale xyz);
+//!                                 optional: a capture with 2D keypoints may leave it to
+//!                                 `trainer track`
 //!   initial_weights.json          optional SkinFile (CSR static weights) the trainer may start from
 //!   images/{camera}/{frame:05}.png  RGB, sRGB-encoded 8-bit (or .exr: linear float RGB)
 //!   masks/{camera}/{frame:05}.png   8-bit grey, foreground > 127
@@ -150,7 +152,8 @@ pub struct Capture {
     pub up_axis: UpAxis,
     /// Initial static weights shipped with the capture, if any.
     pub initial_weights: Option<StaticSkin>,
-    /// One pose per frame.
+    /// One pose per frame; the bind pose throughout when the capture has no motion yet
+    /// ([`Capture::require_motion`]).
     pub poses: Vec<Pose>,
     /// Training frame indices.
     pub train_frames: Vec<usize>,
@@ -220,6 +223,26 @@ impl Capture {
         self.check_index(cam, frame)?;
         let c = &self.rig.cameras[cam];
         images::read_mask(&self.mask_path(cam, frame), c.width, c.height)
+    }
+
+    /// Whether the capture has its skeletal motion (the manifest names a motion file).
+    #[must_use]
+    pub fn has_motion(&self) -> bool {
+        self.manifest.motion.is_some()
+    }
+
+    /// An error naming the manifest's `motion` field when the capture has no motion yet:
+    /// everything that poses the skeleton (training, evaluation, rendering, template
+    /// reconstruction) needs it; `trainer track` fits it to the capture's 2D keypoints.
+    pub fn require_motion(&self) -> Result<(), CaptureError> {
+        if self.has_motion() {
+            return Ok(());
+        }
+        Err(CaptureError::invalid(
+            &self.dir.join(MANIFEST_FILE),
+            "motion",
+            "the capture has no skeletal motion yet: fit it to the 2D keypoints with `trainer track`",
+        ))
     }
 
     /// The frame a template is reconstructed from: the manifest's `canonical_frame`, else the
@@ -458,11 +481,13 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
     }
     for (field, rel) in [
         ("template", &m.template),
-        ("motion", &m.motion),
         ("images", &m.images),
         ("masks", &m.masks),
     ] {
         check_relative(&mfile, field, rel)?;
+    }
+    if let Some(rel) = &m.motion {
+        check_relative(&mfile, "motion", rel)?;
     }
     if let Some(rel) = &m.initial_weights {
         check_relative(&mfile, "initial_weights", rel)?;
@@ -538,20 +563,26 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
         None => None,
     };
 
-    let motion_file = dir.join(&m.motion);
-    let motion: MotionFile = read_json(&motion_file)?;
-    let poses = motion.to_poses(&motion_file, &skeleton)?;
-    if poses.len() != m.frame_count {
-        return Err(CaptureError::invalid(
-            &motion_file,
-            "frames",
-            format!(
-                "{} frames, but the manifest's frame_count is {}",
-                poses.len(),
-                m.frame_count
-            ),
-        ));
-    }
+    let poses = match &m.motion {
+        Some(rel) => {
+            let motion_file = dir.join(rel);
+            let motion: MotionFile = read_json(&motion_file)?;
+            let poses = motion.to_poses(&motion_file, &skeleton)?;
+            if poses.len() != m.frame_count {
+                return Err(CaptureError::invalid(
+                    &motion_file,
+                    "frames",
+                    format!(
+                        "{} frames, but the manifest's frame_count is {}",
+                        poses.len(),
+                        m.frame_count
+                    ),
+                ));
+            }
+            poses
+        }
+        None => vec![skeleton.bind_pose(); m.frame_count],
+    };
 
     let capture = Capture {
         train_frames: m.train_frames.clone(),

@@ -39,8 +39,10 @@ pub struct CaptureManifest {
     pub cameras: Vec<CameraEntry>,
     /// Path of the [`TemplateFile`].
     pub template: String,
-    /// Path of the [`MotionFile`].
-    pub motion: String,
+    /// Path of the [`MotionFile`]; absent when the motion is still to be fitted to the
+    /// capture's 2D keypoints (`trainer track` writes it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<String>,
     /// Path of a [`SkinFile`] of initial weights the trainer may use.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub initial_weights: Option<String>,

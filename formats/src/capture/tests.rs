@@ -68,7 +68,7 @@ fn manifest(format: ImageFormat) -> CaptureManifest {
             })
             .collect(),
         template: "template.json".into(),
-        motion: "motion.json".into(),
+        motion: Some("motion.json".into()),
         initial_weights: Some("initial_weights.json".into()),
         frame_count: 3,
         clips: vec![ClipEntry {
@@ -361,6 +361,32 @@ fn errors_name_the_file_and_field() {
         edit_json(&tmp.path().join(target), |v| edit(v));
         expect_invalid(tmp.path(), file, field);
     }
+}
+
+#[test]
+fn a_capture_without_motion_loads_in_the_bind_pose_and_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    write_capture(tmp.path(), ImageFormat::Png);
+    assert!(load_capture(tmp.path()).unwrap().require_motion().is_ok());
+    edit_json(&tmp.path().join("manifest.json"), |v| {
+        v.as_object_mut().unwrap().remove("motion");
+    });
+    std::fs::remove_file(tmp.path().join("motion.json")).unwrap();
+    let c = load_capture(tmp.path()).unwrap();
+    assert!(!c.has_motion());
+    assert_eq!(c.poses, vec![c.skeleton.bind_pose(); 3]);
+    match c.require_motion() {
+        Err(CaptureError::Invalid { field, reason, .. }) => {
+            assert_eq!(field, "motion");
+            assert!(reason.contains("trainer track"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // A writer without a motion path refuses to write one.
+    let mut m = manifest(ImageFormat::Png);
+    m.motion = None;
+    let w = CaptureWriter::new(tmp.path().join("other"), m).unwrap();
+    assert!(w.write_motion(&c.poses, 30.0).is_err());
 }
 
 #[test]

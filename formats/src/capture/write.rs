@@ -150,16 +150,18 @@ impl CaptureWriter {
         )
     }
 
-    /// Writes the poses to the manifest's `motion` path.
+    /// Writes the poses to the manifest's `motion` path (which must be set).
     pub fn write_motion(&self, poses: &[Pose], fps: f32) -> Result<(), CaptureError> {
+        let rel = self
+            .manifest
+            .motion
+            .as_ref()
+            .ok_or_else(|| self.missing("motion"))?;
         let frames = poses
             .iter()
             .map(|p| p.locals.iter().map(transform_to_array).collect())
             .collect();
-        to_json(
-            &self.dir.join(&self.manifest.motion),
-            &MotionFile { fps, frames },
-        )
+        to_json(&self.dir.join(rel), &MotionFile { fps, frames })
     }
 
     /// Writes initial weights to the manifest's `initial_weights` path (which must be set).

@@ -65,6 +65,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let capture = load_capture(&args.capture)
         .with_context(|| format!("loading the capture {}", args.capture.display()))?;
+    capture.require_motion()?;
     let frame = match args.frame {
         Some(f) => f,
         None => *capture

@@ -115,25 +115,42 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
 
-    let motion_path = capture.dir.join(&capture.manifest.motion);
+    // A capture without motion gets one; one with motion keeps its path.
+    let mut manifest = capture.manifest.clone();
+    let motion_rel = manifest
+        .motion
+        .get_or_insert_with(|| "motion.json".into())
+        .clone();
     super::copy_tree(
         &capture.dir,
         &args.out,
-        &[capture.dir.join(MANIFEST_FILE), motion_path],
+        &[
+            capture.dir.join(MANIFEST_FILE),
+            capture.dir.join(&motion_rel),
+        ],
     )?;
-    let writer = CaptureWriter::new(&args.out, capture.manifest.clone())?;
+    let writer = CaptureWriter::new(&args.out, manifest)?;
     writer.write_motion(&tracked.poses, 30.0)?;
     writer.finish()?;
 
-    let errors = mpjpe(&capture.skeleton, &tracked.poses, &capture.poses)?;
+    // Against the input's motion, when it has one (a synthetic capture's ground truth).
+    let errors = if capture.has_motion() {
+        Some(mpjpe(&capture.skeleton, &tracked.poses, &capture.poses)?)
+    } else {
+        None
+    };
     let csv_path = args.out.join("track.csv");
     let mut csv = String::from(
         "frame,detections,inliers,far,rms_inlier_px,median_px,limit_excess_rad,iterations,mpjpe_vs_input\n",
     );
-    for (f, (fit, e)) in tracked.fits.iter().zip(&errors).enumerate() {
+    for (f, fit) in tracked.fits.iter().enumerate() {
         let r = &fit.report;
+        let e = errors
+            .as_ref()
+            .map(|e| format!("{:.6}", e[f]))
+            .unwrap_or_default();
         csv += &format!(
-            "{f},{},{},{},{:.4},{:.4},{:.5},{},{:.6}\n",
+            "{f},{},{},{},{:.4},{:.4},{:.5},{},{e}\n",
             r.detections,
             r.inliers,
             r.far,
@@ -141,26 +158,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             r.median_px,
             r.limit_excess,
             r.iterations,
-            e
         );
     }
     skinfield_formats::skf::write_atomic(&csv_path, csv.as_bytes())
         .with_context(|| format!("writing {}", csv_path.display()))?;
-    let mean = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
-    let worst = errors.iter().copied().fold(0.0, f64::max);
     let mut out = std::io::stdout().lock();
     writeln!(
         out,
         "tracked {} frames in {seconds:.1} s → {} (per-frame residuals: {})",
-        errors.len(),
+        tracked.poses.len(),
         args.out.display(),
         csv_path.display()
     )?;
-    writeln!(
-        out,
-        "mean per-joint position error against the input's motion: {:.3} (worst frame {:.3}) \
-         skeleton units",
-        mean, worst
-    )?;
+    if let Some(errors) = &errors {
+        let mean = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
+        let worst = errors.iter().copied().fold(0.0, f64::max);
+        writeln!(
+            out,
+            "mean per-joint position error against the input's motion: {mean:.3} (worst frame \
+             {worst:.3}) skeleton units"
+        )?;
+    }
     Ok(())
 }

@@ -459,6 +459,7 @@ pub fn evaluate_mesh_frames(
     options: &EvalOptions,
     mut positions_for: impl FnMut(usize) -> Result<Vec<Vec3>, EvalError>,
 ) -> Result<Vec<FrameMetrics>, EvalError> {
+    capture.require_motion()?;
     if capture.test_frames.is_empty() {
         return Err(EvalError::NoTestFrames(
             capture.dir.join(skinfield_formats::capture::MANIFEST_FILE),

@@ -198,7 +198,7 @@ pub fn write_subject(
         up_axis: "y".into(),
         cameras: rig.cameras.iter().map(CameraEntry::from_camera).collect(),
         template: "template.json".into(),
-        motion: "motion.json".into(),
+        motion: Some("motion.json".into()),
         initial_weights: None,
         frame_count: frame_poses.len(),
         clips,

@@ -339,6 +339,7 @@ pub fn reconstruct(
     capture: &Capture,
     options: &TemplateOptions,
 ) -> Result<Reconstruction, TemplateError> {
+    capture.require_motion()?;
     let (frame, cameras) = check(options, capture)?;
     let mut seconds = StepSeconds::default();
     let start = Instant::now();

@@ -142,6 +142,7 @@ pub fn write_synthetic_keypoints(
     map: &LandmarkMapFile,
     noise: &DetectionNoise,
 ) -> Result<(), CaptureTrackError> {
+    capture.require_motion()?;
     let mut manifest = capture.manifest.clone();
     manifest.keypoints = Some(KEYPOINTS_FOLDER.into());
     let writer = CaptureWriter::new(&capture.dir, manifest)?;

@@ -132,6 +132,7 @@ pub fn train_data(
     initial: &StaticSkin,
     options: &DataOptions,
 ) -> Result<TrainData, DataError> {
+    capture.require_motion()?;
     let skeleton = capture.skeleton.clone();
     let j = skeleton.len();
     if initial.vertex_count() != capture.template.vertex_count() || initial.joint_count() != j {

@@ -1,0 +1,86 @@
+//! A capture that has 2D keypoints but no skeletal motion: everything that poses the skeleton
+//! refuses it with a message naming `motion`, and `trainer track` writes a copy that has it.
+
+use std::process::Command;
+
+use skinfield_formats::capture::load_capture;
+
+fn trainer(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_capture_without_motion_is_tracked_and_only_then_trained() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let c = cap.to_str().unwrap();
+    let (code, err) = trainer(&[
+        "synth",
+        "--out",
+        c,
+        "--cameras",
+        "4",
+        "--resolution",
+        "48",
+        "--grid",
+        "40",
+        "--vertices",
+        "2500",
+        "--train-frames",
+        "1",
+        "--test-frames",
+        "1",
+        "--keypoints",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let truth = load_capture(&cap).unwrap().poses;
+    // Drop the motion, as a capture from video and a 2D detector would come.
+    let manifest = cap.join("manifest.json");
+    let mut m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    m.as_object_mut().unwrap().remove("motion");
+    std::fs::write(&manifest, serde_json::to_vec(&m).unwrap()).unwrap();
+    std::fs::remove_file(cap.join("motion.json")).unwrap();
+    assert!(!load_capture(&cap).unwrap().has_motion());
+
+    let model = tmp.path().join("m.skf");
+    for args in [
+        vec!["train", "--capture", c, "--out", model.to_str().unwrap()],
+        vec!["eval", "--capture", c, "--weights", "initial"],
+        vec![
+            "template",
+            "--capture",
+            c,
+            "--out",
+            tmp.path().join("t").to_str().unwrap(),
+        ],
+    ] {
+        let (code, err) = trainer(&args);
+        assert_eq!(code, 1, "{args:?}");
+        assert!(
+            err.contains("`motion`") && err.contains("trainer track"),
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!model.exists());
+
+    let tracked = tmp.path().join("tracked");
+    let (code, err) = trainer(&["track", "--capture", c, "--out", tracked.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let copy = load_capture(&tracked).unwrap();
+    assert!(copy.has_motion());
+    // Fitted to the detections (2 px noise at 48²): the root within a few centimetres.
+    for (f, (got, want)) in copy.poses.iter().zip(&truth).enumerate() {
+        let d = got.locals[0]
+            .translation
+            .distance(want.locals[0].translation);
+        assert!(d < 0.1, "frame {f}: root {d} m off");
+    }
+}
