@@ -243,18 +243,27 @@ pub fn paint(
     template: &mut Template,
     tolerance: f32,
 ) -> Result<(usize, Option<usize>), CaptureError> {
-    let visibility: Vec<Visibility> = cameras
+    let visibility = cameras
         .iter()
         .map(|&c| {
-            Visibility::new(
-                &capture.rig.cameras[c],
+            let camera = capture
+                .rig
+                .cameras
+                .get(c)
+                .ok_or_else(|| CaptureError::Invalid {
+                    file: capture.dir.join(MANIFEST_FILE),
+                    field: "cameras".into(),
+                    reason: format!("camera index {c} out of range"),
+                })?;
+            Ok(Visibility::new(
+                camera,
                 &template.positions,
                 &template.normals,
                 &template.triangles,
                 tolerance,
-            )
+            ))
         })
-        .collect();
+        .collect::<Result<Vec<_>, CaptureError>>()?;
     let images = cameras
         .iter()
         .map(|&c| capture.load_image(c, frame))

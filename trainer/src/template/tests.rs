@@ -137,6 +137,7 @@ fn painting_the_true_template_recovers_its_labels() {
         share > 0.97,
         "{share} right, {unseen} unseen, {unvoted:?} unvoted"
     );
+    assert!(super::paint(&capture, frame, &[8], &mut capture.template.clone(), 0.01).is_err());
     let colors = template.colors.unwrap();
     assert!(
         colors
