@@ -3,23 +3,13 @@
 //! `template.glb` holds the same mesh, the report scores it against the ground truth; and the
 //! refusals.
 
-use std::path::Path;
-use std::process::Command;
+mod common;
 
+use std::path::Path;
+
+use common::trainer;
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::gltf_io::load_gltf;
-
-fn trainer(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 fn synth(dir: &Path, label_noise: &str) {
     let (code, _, err) = trainer(&[

@@ -1,27 +1,17 @@
 //! A capture that has 2D keypoints but no skeletal motion: everything that poses the skeleton
 //! refuses it with a message naming `motion`, and `trainer track` writes a copy that has it.
 
-use std::process::Command;
+mod common;
 
+use common::trainer;
 use skinfield_formats::capture::load_capture;
-
-fn trainer(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 #[test]
 fn a_capture_without_motion_is_tracked_and_only_then_trained() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("cap");
     let c = cap.to_str().unwrap();
-    let (code, err) = trainer(&[
+    let (code, _, err) = trainer(&[
         "synth",
         "--out",
         c,
@@ -62,7 +52,7 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
             tmp.path().join("t").to_str().unwrap(),
         ],
     ] {
-        let (code, err) = trainer(&args);
+        let (code, _, err) = trainer(&args);
         assert_eq!(code, 1, "{args:?}");
         assert!(
             err.contains("`motion`") && err.contains("trainer track"),
@@ -72,7 +62,7 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
     assert!(!model.exists());
 
     let tracked = tmp.path().join("tracked");
-    let (code, err) = trainer(&["track", "--capture", c, "--out", tracked.to_str().unwrap()]);
+    let (code, _, err) = trainer(&["track", "--capture", c, "--out", tracked.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     let copy = load_capture(&tracked).unwrap();
     assert!(copy.has_motion());

@@ -345,18 +345,7 @@ impl CaptureWriter {
         keypoints: &[Option<Keypoint2d>],
     ) -> Result<(), CaptureError> {
         let folder = self.keypoints_folder()?;
-        let camera = &self
-            .manifest()
-            .cameras
-            .get(cam)
-            .ok_or_else(|| {
-                CaptureError::invalid(
-                    &self.dir().join(super::MANIFEST_FILE),
-                    "cameras",
-                    format!("camera index {cam} out of range"),
-                )
-            })?
-            .name;
+        let camera = &self.camera(cam)?.name;
         write_file(
             &keypoints_file(self.dir(), folder, camera, frame),
             &openpose_json(keypoints),

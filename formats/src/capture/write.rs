@@ -201,11 +201,7 @@ impl CaptureWriter {
     /// Writes the colour image of camera `cam` (index into the manifest's cameras) at `frame`,
     /// linear RGB, in the manifest's image format.
     pub fn write_image(&self, cam: usize, frame: usize, rgb: &[Vec3]) -> Result<(), CaptureError> {
-        let c = self
-            .manifest
-            .cameras
-            .get(cam)
-            .ok_or_else(|| self.missing("cameras"))?;
+        let c = self.camera(cam)?;
         let fmt = self.manifest.image_format;
         let path = frame_file(&self.dir, &self.manifest.images, &c.name, frame, fmt);
         match fmt {
@@ -222,11 +218,7 @@ impl CaptureWriter {
         frame: usize,
         coverage: &[f32],
     ) -> Result<(), CaptureError> {
-        let c = self
-            .manifest
-            .cameras
-            .get(cam)
-            .ok_or_else(|| self.missing("cameras"))?;
+        let c = self.camera(cam)?;
         let path = frame_file(
             &self.dir,
             &self.manifest.masks,
@@ -245,11 +237,7 @@ impl CaptureWriter {
         frame: usize,
         labels: &[u8],
     ) -> Result<(), CaptureError> {
-        let c = self
-            .manifest
-            .cameras
-            .get(cam)
-            .ok_or_else(|| self.missing("cameras"))?;
+        let c = self.camera(cam)?;
         let entry = self
             .manifest
             .labels
@@ -276,6 +264,14 @@ impl CaptureWriter {
         bytes.push(b'\n');
         write_file(&path, &bytes)?;
         Ok(path)
+    }
+
+    /// The manifest's entry of camera `cam`.
+    pub(super) fn camera(&self, cam: usize) -> Result<&super::CameraEntry, CaptureError> {
+        self.manifest
+            .cameras
+            .get(cam)
+            .ok_or_else(|| self.missing("cameras"))
     }
 
     fn missing(&self, field: &str) -> CaptureError {
