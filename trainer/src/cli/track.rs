@@ -44,6 +44,10 @@ pub struct Args {
     /// Final scale of the robust loss (pixels).
     #[arg(long, default_value_t = TrackOptions::default().robust_scale_px)]
     pub robust_px: f64,
+    /// Weight of the silhouette refinement (outline vertices of the skinned template against
+    /// the masks) relative to the keypoints; 0 turns it off.
+    #[arg(long, default_value_t = TrackOptions::default().silhouette_weight)]
+    pub silhouette_weight: f64,
 }
 
 /// Corruption of synthetic detections (`trainer track --synthesize`, `trainer synth
@@ -102,6 +106,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         smooth_weight: args.smooth_weight,
         limit_weight: args.limit_weight,
         robust_scale_px: args.robust_px,
+        silhouette_weight: args.silhouette_weight,
         ..TrackOptions::default()
     };
     let bar = indicatif::ProgressBar::new(capture.frame_count() as u64);

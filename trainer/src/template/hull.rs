@@ -68,6 +68,13 @@ impl HullView {
         top * (1.0 - ty) + bottom * ty
     }
 
+    /// Signed distance (pixels, negative inside) from image point `p` to the mask's outline.
+    #[must_use]
+    pub fn signed_pixels(&self, p: Vec2) -> f32 {
+        let (d, _) = self.outline.distance(p);
+        if self.coverage_at(p) >= 0.5 { -d } else { d }
+    }
+
     /// Signed distance (metres, negative inside) from `x` to this view's silhouette cone,
     /// measured across the line of sight at `x`'s depth. Points behind the camera are far
     /// outside.
@@ -80,9 +87,7 @@ impl HullView {
         if !p.is_finite() {
             return f32::MAX;
         }
-        let (d, _) = self.outline.distance(p);
-        let signed = if self.coverage_at(p) >= 0.5 { -d } else { d };
-        signed * depth * self.metres_per_pixel
+        self.signed_pixels(p) * depth * self.metres_per_pixel
     }
 }
 

@@ -4,12 +4,14 @@
 //! - [`kinematics`]: joint angles and root rotation → landmark positions (f64);
 //! - [`alignment`]: the root translation in closed form from the rays through the detections;
 //! - [`solve`]: the per-frame robust Levenberg–Marquardt fit;
+//! - [`silhouette`]: the optional silhouette refinement on the skinned template;
 //! - [`capture`]: landmark maps, synthetic keypoints in a capture, tracking all its frames;
 //! - [`synthetic`]: detections projected from known landmarks, with noise, drops and swaps.
 
 pub mod alignment;
 pub mod capture;
 pub mod kinematics;
+pub mod silhouette;
 pub mod solve;
 pub mod synthetic;
 

@@ -24,6 +24,8 @@ use skinfield_formats::{Camera, JointDofs};
 
 use super::alignment::{Ray, global_alignment};
 use super::kinematics::{Kinematics, Landmark, rotvec_to_dquat};
+use super::silhouette::{TrackingBody, outline_residual};
+use crate::template::hull::HullView;
 
 /// One 2D detection of a landmark in one view.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,6 +55,10 @@ pub struct TrackOptions {
     pub iterations: usize,
     /// Root headings tried (about the up axis) when a frame has no predecessor.
     pub headings: usize,
+    /// Weight of the silhouette term ([`super::silhouette`]) relative to the keypoints: the
+    /// outline residuals together weigh this many times the keypoint residuals. 0 turns the
+    /// refinement off.
+    pub silhouette_weight: f64,
 }
 
 impl Default for TrackOptions {
@@ -66,6 +72,7 @@ impl Default for TrackOptions {
             rounds: 5,
             iterations: 40,
             headings: 8,
+            silhouette_weight: 0.0,
         }
     }
 }
@@ -102,6 +109,9 @@ pub struct FrameReport {
     pub limit_excess: f64,
     /// Levenberg–Marquardt iterations run in total.
     pub iterations: usize,
+    /// RMS of the outline vertices' distances to the mask outlines after the silhouette
+    /// refinement (pixels, unbounded); `None` without it.
+    pub silhouette_rms_px: Option<f64>,
 }
 
 /// Why a frame could not be fitted.
@@ -158,6 +168,7 @@ pub struct Tracker<'a> {
     depth: Vec<usize>,
     up: DVec3,
     options: TrackOptions,
+    body: Option<&'a TrackingBody>,
 }
 
 /// A detection this many final robust scales off counts as far ([`FrameReport::far`]).
@@ -196,7 +207,16 @@ impl<'a> Tracker<'a> {
             depth,
             up,
             options,
+            body: None,
         }
+    }
+
+    /// The tracker with a skinned body for the silhouette term (used by
+    /// [`Self::fit_with_masks`] when [`TrackOptions::silhouette_weight`] is positive).
+    #[must_use]
+    pub fn with_body(mut self, body: &'a TrackingBody) -> Self {
+        self.body = Some(body);
+        self
     }
 
     /// The kinematics layer.
@@ -254,6 +274,18 @@ impl<'a> Tracker<'a> {
         detections: &[Vec<Option<Detection>>],
         previous: Option<&FrameFit>,
     ) -> Result<FrameFit, TrackError> {
+        self.fit_with_masks(detections, previous, None)
+    }
+
+    /// [`Self::fit`], then, with `masks` (one per camera, in order), a body
+    /// ([`Self::with_body`]) and a positive silhouette weight, the pose refined with the
+    /// silhouette term ([`super::silhouette`]).
+    pub fn fit_with_masks(
+        &self,
+        detections: &[Vec<Option<Detection>>],
+        previous: Option<&FrameFit>,
+        masks: Option<&[HullView]>,
+    ) -> Result<FrameFit, TrackError> {
         let obs = self.observations(detections)?;
         if obs.len() < 2 {
             return Err(TrackError::TooFewDetections(obs.len()));
@@ -272,7 +304,78 @@ impl<'a> Tracker<'a> {
             Some(p) => vec![(p.root_rotation, p.angles.clone())],
             None => headings(),
         };
-        self.best_of(&obs, starts, previous)
+        let fit = self.best_of(&obs, starts, previous)?;
+        match (self.body, masks) {
+            (Some(body), Some(masks)) if self.options.silhouette_weight > 0.0 => {
+                Ok(self.refine_with_silhouettes(&obs, fit, previous, body, masks))
+            }
+            _ => Ok(fit),
+        }
+    }
+
+    /// The silhouette refinement of a keypoint fit (see [`super::silhouette`]).
+    fn refine_with_silhouettes(
+        &self,
+        obs: &[Observation],
+        fit: FrameFit,
+        previous: Option<&FrameFit>,
+        body: &TrackingBody,
+        masks: &[HullView],
+    ) -> FrameFit {
+        let root0 = fit.root_rotation;
+        let mut params = vec![0.0; 3];
+        params.extend_from_slice(&fit.angles);
+        let mut ws = Workspace::new(self, obs.len());
+        let unit = vec![1.0; obs.len()];
+        let plain = Problem {
+            tracker: self,
+            obs,
+            robust: &unit,
+            hierarchical: false,
+            root0,
+            previous,
+            silhouette: None,
+        };
+        let robust = self.robust_weights(
+            &plain.errors(&params, &mut ws),
+            self.options.robust_scale_px,
+        );
+        let (_, shift) = plain.root_and_shift(&params, &mut ws);
+        body.pose(&ws.worlds, shift.unwrap_or(DVec3::ZERO), &mut ws.posed);
+        let outline = body.outline_vertices(masks, &ws.posed);
+        let count: usize = outline.iter().map(Vec::len).sum();
+        if count == 0 {
+            return fit;
+        }
+        let keypoints = 2.0 * obs.len() as f64;
+        let term = SilhouetteTerm {
+            body,
+            masks,
+            outline: &outline,
+            weight_sqrt: (self.options.silhouette_weight * keypoints / count as f64).sqrt(),
+        };
+        let problem = Problem {
+            robust: &robust,
+            silhouette: Some(&term),
+            ..plain
+        };
+        let (_, its) = levenberg_marquardt(&problem, &mut params, self.options.iterations, &mut ws);
+        let mut refined = self.finish(
+            obs,
+            &robust,
+            &params,
+            root0,
+            previous,
+            fit.report.iterations + its,
+        );
+        refined.report.silhouette_rms_px = Some(problem.silhouette_rms(&params, &mut ws));
+        refined
+    }
+
+    /// Geman–McClure weights of reprojection `errors` at scale `scale` (pixels).
+    fn robust_weights(&self, errors: &[f64], scale: f64) -> Vec<f64> {
+        let s2 = scale * scale;
+        errors.iter().map(|e| (s2 / (s2 + e * e)).powi(2)).collect()
     }
 
     /// The lowest-cost fit over `starts`.
@@ -318,6 +421,7 @@ impl<'a> Tracker<'a> {
                 hierarchical,
                 root0,
                 previous,
+                silhouette: None,
             };
             let (c, its) =
                 levenberg_marquardt(&problem, &mut params, self.options.iterations, &mut ctx);
@@ -328,25 +432,40 @@ impl<'a> Tracker<'a> {
             if round + 1 < rounds {
                 scale = (scale * 0.5).max(self.options.robust_scale_px);
             }
-            for (w, e) in robust.iter_mut().zip(&errors) {
-                let s2 = scale * scale;
-                *w = (s2 / (s2 + e * e)).powi(2);
-            }
+            robust = self.robust_weights(&errors, scale);
         }
-        // Final report with the final weights.
+        Ok((
+            cost,
+            self.finish(obs, &robust, &params, root0, previous, iterations),
+        ))
+    }
+
+    /// The fit of `params` (root rotation relative to `root0`, then the angles) with its
+    /// report under the robust weights `robust`.
+    fn finish(
+        &self,
+        obs: &[Observation],
+        robust: &[f64],
+        params: &[f64],
+        root0: DQuat,
+        previous: Option<&FrameFit>,
+        iterations: usize,
+    ) -> FrameFit {
+        let mut ctx = Workspace::new(self, obs.len());
         let problem = Problem {
             tracker: self,
             obs,
-            robust: &robust,
+            robust,
             hierarchical: false,
             root0,
             previous,
+            silhouette: None,
         };
-        let errors = problem.errors(&params, &mut ctx);
-        let (root, shift) = problem.root_and_shift(&params, &mut ctx);
+        let errors = problem.errors(params, &mut ctx);
+        let (root, shift) = problem.root_and_shift(params, &mut ctx);
         let inl: Vec<f64> = errors
             .iter()
-            .zip(&robust)
+            .zip(robust)
             .filter(|(_, w)| **w >= 0.5)
             .map(|(e, _)| *e)
             .collect();
@@ -367,16 +486,14 @@ impl<'a> Tracker<'a> {
                 .count(),
             limit_excess: self.limit_excess(&params[3..]),
             iterations,
+            silhouette_rms_px: None,
         };
-        Ok((
-            cost,
-            FrameFit {
-                root_rotation: root,
-                world_shift: shift.unwrap_or(DVec3::ZERO),
-                angles: params[3..].to_vec(),
-                report,
-            },
-        ))
+        FrameFit {
+            root_rotation: root,
+            world_shift: shift.unwrap_or(DVec3::ZERO),
+            angles: params[3..].to_vec(),
+            report,
+        }
     }
 
     /// Largest excess of any Euler angle over its limits (radians).
@@ -402,6 +519,7 @@ struct Workspace {
     points: Vec<DVec3>,
     obs_points: Vec<DVec3>,
     rays: Vec<Ray>,
+    posed: Vec<DVec3>,
 }
 
 impl Workspace {
@@ -411,6 +529,7 @@ impl Workspace {
             points: vec![DVec3::ZERO; t.landmarks.len()],
             obs_points: vec![DVec3::ZERO; obs],
             rays: Vec::with_capacity(obs),
+            posed: Vec::new(),
         }
     }
 }
@@ -423,6 +542,21 @@ struct Problem<'t, 'a> {
     hierarchical: bool,
     root0: DQuat,
     previous: Option<&'t FrameFit>,
+    silhouette: Option<&'t SilhouetteTerm<'t>>,
+}
+
+/// The silhouette residuals of a refinement: outline vertices fixed per view.
+struct SilhouetteTerm<'t> {
+    body: &'t TrackingBody,
+    masks: &'t [HullView],
+    outline: &'t [Vec<u32>],
+    weight_sqrt: f64,
+}
+
+impl SilhouetteTerm<'_> {
+    fn count(&self) -> usize {
+        self.outline.iter().map(Vec::len).sum()
+    }
 }
 
 impl Problem<'_, '_> {
@@ -479,7 +613,29 @@ impl Problem<'_, '_> {
     fn residual_count(&self) -> usize {
         let a = self.tracker.kinematics.angle_count();
         let temporal = if self.previous.is_some() { 3 + a } else { 0 };
-        2 * self.obs.len() + a + temporal
+        let silhouette = self.silhouette.map_or(0, SilhouetteTerm::count);
+        2 * self.obs.len() + a + temporal + silhouette
+    }
+
+    /// RMS distance (pixels) of the outline vertices to the mask outlines at `params`.
+    fn silhouette_rms(&self, params: &[f64], ws: &mut Workspace) -> f64 {
+        let Some(term) = self.silhouette else {
+            return 0.0;
+        };
+        let (_, shift) = self.root_and_shift(params, ws);
+        term.body
+            .pose(&ws.worlds, shift.unwrap_or(DVec3::ZERO), &mut ws.posed);
+        let mut sum = 0.0;
+        for (view, vertices) in term.masks.iter().zip(term.outline) {
+            for &v in vertices {
+                let p = view.camera.project_f64(ws.posed[v as usize]);
+                let d = p.map_or(BEHIND_CAMERA_PX, |p| {
+                    f64::from(view.signed_pixels(glam::Vec2::new(p.x as f32, p.y as f32)))
+                });
+                sum += d * d;
+            }
+        }
+        (sum / term.count().max(1) as f64).sqrt()
     }
 
     /// The residual vector: weighted reprojection errors (Eq. 6), limit excesses (Eq. 7),
@@ -543,6 +699,16 @@ impl Problem<'_, '_> {
             for (x, y) in angles.iter().zip(&p.angles) {
                 out[k] = sw * (x - y);
                 k += 1;
+            }
+        }
+        if let Some(term) = self.silhouette {
+            term.body
+                .pose(&ws.worlds, shift.unwrap_or(DVec3::ZERO), &mut ws.posed);
+            for (view, vertices) in term.masks.iter().zip(term.outline) {
+                for &v in vertices {
+                    out[k] = term.weight_sqrt * outline_residual(view, ws.posed[v as usize]);
+                    k += 1;
+                }
             }
         }
         debug_assert_eq!(k, out.len());
