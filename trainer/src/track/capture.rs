@@ -349,7 +349,13 @@ mod tests {
         let capture = load_capture(dir.path()).unwrap();
         assert_eq!(capture.landmark_map().unwrap().as_ref(), Some(&map));
         let mut frames = 0;
-        let tracked = track_capture(&capture, &TrackOptions::default(), |_| frames += 1).unwrap();
+        // The keypoint layers alone: the silhouette refinement trades joint accuracy for the
+        // outline of a body that cannot match the deformer's masks exactly (tested below).
+        let keypoints_only = TrackOptions {
+            silhouette_weight: 0.0,
+            ..TrackOptions::default()
+        };
+        let tracked = track_capture(&capture, &keypoints_only, |_| frames += 1).unwrap();
         assert_eq!(frames, capture.frame_count());
         // Every detected landmark lands where it was (joints no keypoint sees, such as the
         // spine or the clavicles, are only determined up to the skeleton's null space, so MPJPE
@@ -411,7 +417,7 @@ mod tests {
         // a skirt pushed out by the legs, so the outline cannot fit exactly. The refinement
         // must fit it better than the keypoints alone; it trades some joint accuracy for that
         // (measured: up to 2.1 cm on a frame at weight 1, where exact keypoints alone give
-        // micrometres), which is why it is off by default.
+        // micrometres; with realistic detection noise it halves the joint error instead).
         assert!(
             after < before,
             "outline RMS {after} px after, {before} px before"
