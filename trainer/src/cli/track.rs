@@ -10,6 +10,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args as ClapArgs;
 use skinfield_formats::capture::{Capture, CaptureWriter, MANIFEST_FILE, load_capture};
+use skinfield_trainer::eval::{PreparedSkinning, Skinning};
 use skinfield_trainer::track::TrackOptions;
 use skinfield_trainer::track::capture::{
     default_landmark_map, mpjpe, track_capture, write_synthetic_keypoints,
@@ -48,6 +49,11 @@ pub struct Args {
     /// the masks) relative to the keypoints; 0 turns it off (5.5× faster, less accurate).
     #[arg(long, default_value_t = TrackOptions::default().silhouette_weight)]
     pub silhouette_weight: f64,
+    /// Weights of the silhouette term's body: `initial` (the capture's, bone heat when it ships
+    /// none), `static:FILE` (`trainer train --static`), `skf:FILE` (SkinNet at the bind pose) or
+    /// `oracle` (the capture's true weights; a ceiling for experiments).
+    #[arg(long, default_value = "initial")]
+    pub body_weights: Skinning,
 }
 
 /// Corruption of synthetic detections (`trainer track --synthesize`, `trainer synth
@@ -109,13 +115,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         silhouette_weight: args.silhouette_weight,
         ..TrackOptions::default()
     };
+    let body_skin = match &args.body_weights {
+        Skinning::Initial => None,
+        other => Some(
+            PreparedSkinning::new(&capture, other)
+                .and_then(|s| s.bind_skin(&capture))
+                .context("--body-weights")?,
+        ),
+    };
     let bar = indicatif::ProgressBar::new(capture.frame_count() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("track {bar:30} {pos}/{len} {elapsed_precise}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     let start = std::time::Instant::now();
-    let tracked = track_capture(&capture, &options, |_| bar.inc(1))
+    let tracked = track_capture(&capture, &options, body_skin.as_ref(), |_| bar.inc(1))
         .with_context(|| format!("tracking {}", args.capture.display()))?;
     bar.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();

@@ -220,6 +220,9 @@ pub enum EvalError {
         /// Vertices of the template.
         vertices: usize,
     },
+    /// The skinning has no weights outside the test frames (`bound-pose`).
+    #[error("`{0}` is fitted per test frame and has no bind-pose weights")]
+    NoBindWeights(&'static str),
     /// A template file is unreadable or holds no mesh.
     #[error("{}: {reason}", path.display())]
     Template {
@@ -334,6 +337,25 @@ impl PreparedSkinning {
             method: skinning.method_name(),
             weights,
         })
+    }
+
+    /// The weights of the capture's template in the bind pose, as a static skin: what a
+    /// pose-independent consumer (the tracker's silhouette body) can use. SkinNet is queried at
+    /// the skeleton's bind pose; `bound-pose` has no weights outside its test frames.
+    pub fn bind_skin(&self, capture: &Capture) -> Result<StaticSkin, EvalError> {
+        match &self.weights {
+            Weights::Static { skin, .. } => Ok(skin.clone()),
+            Weights::Net { model, path } => posing::skinnet_weights(
+                model,
+                &capture.template.positions,
+                &capture.skeleton.bind_pose(),
+            )
+            .map_err(|e| EvalError::Skf {
+                path: path.clone(),
+                reason: format!("bind pose: {e}"),
+            }),
+            Weights::BestPosed { .. } => Err(EvalError::NoBindWeights(self.method)),
+        }
     }
 
     /// The row name.

@@ -11,7 +11,7 @@ use glam::Vec3;
 use skinfield_formats::{Pose, Skeleton, SkinError, StaticSkin};
 use skinfield_runtime::{
     BoundMesh, FrameState, Method, Palette, RuntimeError, Scratch, SkinJob, SkinNetModel,
-    StaticSkinJob,
+    StaticSkinJob, WeightsJob,
 };
 
 /// How static weights blend the joint transforms.
@@ -134,6 +134,29 @@ pub fn pose_skinnet(
     let mut frame = FrameState::new(model);
     frame.set_pose(model, pose)?;
     skin_frame(model, &mesh, &frame, Method::Lbs)
+}
+
+/// SkinNet's weights at every point of `rest` for `pose`, as a static skin (the runtime's
+/// `WeightsJob`; weights the model's candidate mask zeroes are left out).
+pub fn skinnet_weights(
+    model: &SkinNetModel,
+    rest: &[Vec3],
+    pose: &Pose,
+) -> Result<StaticSkin, PosingError> {
+    let mesh = BoundMesh::bind(model, rest)?;
+    let mut frame = FrameState::new(model);
+    frame.set_pose(model, pose)?;
+    let joints = model.joint_count();
+    let mut dense = vec![0.0; rest.len() * joints];
+    WeightsJob {
+        model,
+        mesh: &mesh,
+        frame: &frame,
+        first_vertex: 0,
+        out_weights: &mut dense,
+    }
+    .run(&mut Scratch::new(model))?;
+    Ok(StaticSkin::from_dense(&dense, joints)?)
 }
 
 /// Every vertex of a bound mesh skinned with SkinNet for a posed frame (`SkinJob`).

@@ -321,3 +321,36 @@ fn worst_vertex_and_relative_figures_follow_a_known_shift() {
     assert!(frames.iter().all(|f| f.max_vertex_cm.is_none()));
     assert_eq!(average("other", &frames, size).max_vertex_cm, None);
 }
+
+#[test]
+fn bind_skins_are_the_weights_each_skinning_gives_at_the_bind_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let capture = tiny_capture(dir.path());
+    let bind =
+        |s: &Skinning| PreparedSkinning::new(&capture, s).and_then(|p| p.bind_skin(&capture));
+    // The root-only SkinNet (output bias e^30 for the root) gives every vertex the root alone.
+    let skf = dir.path().join("root.skf");
+    root_only_skf(&capture, &skf);
+    let skin = bind(&Skinning::Skf(skf)).unwrap();
+    assert_eq!(skin.vertex_count(), capture.template.vertex_count());
+    for v in 0..skin.vertex_count() {
+        let (joints, weights) = skin.influences(v);
+        assert_eq!(joints, [0], "vertex {v}");
+        assert!((weights[0] - 1.0).abs() < 1e-6, "vertex {v}: {weights:?}");
+    }
+    // Static weights are their own bind skin; the oracle is the capture's true weights.
+    let oracle = bind(&Skinning::Oracle).unwrap();
+    assert_eq!(
+        oracle.to_dense(),
+        capture
+            .evaluation_true_weights()
+            .unwrap()
+            .unwrap()
+            .to_dense()
+    );
+    // Per-frame fits have none.
+    assert!(matches!(
+        bind(&Skinning::BoundPose),
+        Err(EvalError::NoBindWeights("bound-pose"))
+    ));
+}

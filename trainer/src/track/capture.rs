@@ -4,7 +4,7 @@
 use glam::{DVec3, Mat4};
 use skinfield_formats::capture::keypoints::{BODY_25, Keypoint2d, LandmarkEntry, LandmarkMapFile};
 use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
-use skinfield_formats::{Pose, Skeleton, SkeletonError};
+use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
 
 use super::kinematics::{Kinematics, Landmark};
 use super::silhouette::TrackingBody;
@@ -38,6 +38,21 @@ pub enum CaptureTrackError {
     /// The silhouette term's body could not be skinned (initial weights).
     #[error("the silhouette term's body: {0}")]
     Body(#[from] crate::train::data::DataError),
+    /// The weights given for the silhouette term's body do not fit the capture.
+    #[error(
+        "the silhouette term's body weights cover {vertices} vertices and {joints} joints, the \
+         template has {template_vertices} vertices and the skeleton {skeleton_joints} joints"
+    )]
+    BodySkin {
+        /// Vertices the weights cover.
+        vertices: usize,
+        /// Joints the weights cover.
+        joints: usize,
+        /// Template vertices.
+        template_vertices: usize,
+        /// Skeleton joints.
+        skeleton_joints: usize,
+    },
     /// A mask has no outline for the silhouette term.
     #[error("frame {frame}, camera {camera}: mask: {source}")]
     Mask {
@@ -201,10 +216,15 @@ pub struct TrackedMotion {
 
 /// Tracks every frame of `capture` from its keypoints, in frame order; a frame starts from the
 /// previous one when both belong to the same clip (the manifest's clips), otherwise from a
-/// heading search. `progress` is called after each frame.
+/// heading search. The silhouette term's body is the template skinned with `body_skin` (one row
+/// per template vertex), or with the capture's initial weights (bone heat when it ships none)
+/// when `None`: a body whose skinning is closer to the truth biases the outline fit less, so a
+/// second pass with weights trained on the first pass's motion tracks better
+/// (`docs/experiments/tracking.md`). `progress` is called after each frame.
 pub fn track_capture(
     capture: &Capture,
     options: &TrackOptions,
+    body_skin: Option<&StaticSkin>,
     mut progress: impl FnMut(usize),
 ) -> Result<TrackedMotion, CaptureTrackError> {
     let map = capture
@@ -213,10 +233,27 @@ pub fn track_capture(
     let landmarks = landmarks_of(&map, &capture.skeleton);
     let kinematics = Kinematics::new(&capture.skeleton);
     let body = if options.silhouette_weight > 0.0 {
-        let skin = crate::train::data::initial_weights(capture)?;
+        let initial;
+        let skin = match body_skin {
+            Some(skin) => skin,
+            None => {
+                initial = crate::train::data::initial_weights(capture)?;
+                &initial
+            }
+        };
+        if skin.vertex_count() != capture.template.vertex_count()
+            || skin.joint_count() != capture.skeleton.len()
+        {
+            return Err(CaptureTrackError::BodySkin {
+                vertices: skin.vertex_count(),
+                joints: skin.joint_count(),
+                template_vertices: capture.template.vertex_count(),
+                skeleton_joints: capture.skeleton.len(),
+            });
+        }
         Some(TrackingBody::new(
             &capture.template,
-            &skin,
+            skin,
             &capture.skeleton,
         ))
     } else {
@@ -321,31 +358,38 @@ mod tests {
 
     use super::*;
 
-    #[test]
-    fn exact_keypoints_written_into_a_capture_track_back_to_its_motion() {
-        let dir = tempfile::tempdir().unwrap();
+    /// Detections without noise, drops or swaps.
+    const EXACT: DetectionNoise = DetectionNoise {
+        sigma_px: 0.0,
+        drop_rate: 0.0,
+        swap_rate: 0.0,
+        seed: 0,
+    };
+
+    /// A tiny synthetic capture (4 cameras at 96²) in `dir`, without keypoints.
+    fn tiny_capture(dir: &std::path::Path) -> Capture {
         let config = crate::synth::SynthConfig {
             cameras: 4,
             width: 96,
             height: 96,
             ..crate::synth::SynthConfig::tiny()
         };
-        crate::synth::synthesize(dir.path(), &config).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        crate::synth::synthesize(dir, &config).unwrap();
+        load_capture(dir).unwrap()
+    }
+
+    #[test]
+    fn exact_keypoints_written_into_a_capture_track_back_to_its_motion() {
+        let dir = tempfile::tempdir().unwrap();
+        let capture = tiny_capture(dir.path());
         assert!(capture.landmark_map().unwrap().is_none());
         assert!(matches!(
-            track_capture(&capture, &TrackOptions::default(), |_| {}),
+            track_capture(&capture, &TrackOptions::default(), None, |_| {}),
             Err(CaptureTrackError::NoKeypoints)
         ));
         let map = default_landmark_map(&capture.skeleton);
         assert_eq!(map.detector, "BODY_25");
-        let exact = DetectionNoise {
-            sigma_px: 0.0,
-            drop_rate: 0.0,
-            swap_rate: 0.0,
-            seed: 0,
-        };
-        write_synthetic_keypoints(&capture, &map, &exact).unwrap();
+        write_synthetic_keypoints(&capture, &map, &EXACT).unwrap();
         let capture = load_capture(dir.path()).unwrap();
         assert_eq!(capture.landmark_map().unwrap().as_ref(), Some(&map));
         let mut frames = 0;
@@ -355,7 +399,7 @@ mod tests {
             silhouette_weight: 0.0,
             ..TrackOptions::default()
         };
-        let tracked = track_capture(&capture, &keypoints_only, |_| frames += 1).unwrap();
+        let tracked = track_capture(&capture, &keypoints_only, None, |_| frames += 1).unwrap();
         assert_eq!(frames, capture.frame_count());
         // Every detected landmark lands where it was (joints no keypoint sees, such as the
         // spine or the clavicles, are only determined up to the skeleton's null space, so MPJPE
@@ -379,30 +423,18 @@ mod tests {
     #[test]
     fn the_silhouette_refinement_explains_the_masks_and_keeps_an_exact_fit() {
         let dir = tempfile::tempdir().unwrap();
-        let config = crate::synth::SynthConfig {
-            cameras: 4,
-            width: 96,
-            height: 96,
-            ..crate::synth::SynthConfig::tiny()
-        };
-        crate::synth::synthesize(dir.path(), &config).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
-        let exact = DetectionNoise {
-            sigma_px: 0.0,
-            drop_rate: 0.0,
-            swap_rate: 0.0,
-            seed: 0,
-        };
-        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &exact)
+        let capture = tiny_capture(dir.path());
+        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
             .unwrap();
         let capture = load_capture(dir.path()).unwrap();
+        let oracle = capture.evaluation_true_weights().unwrap().unwrap();
         // A negligible weight measures the outline misfit of the keypoint fit itself.
-        let track = |weight: f64| {
+        let track = |weight: f64, body: Option<&StaticSkin>| {
             let options = TrackOptions {
                 silhouette_weight: weight,
                 ..TrackOptions::default()
             };
-            let tracked = track_capture(&capture, &options, |_| {}).unwrap();
+            let tracked = track_capture(&capture, &options, body, |_| {}).unwrap();
             let rms: Vec<f64> = tracked
                 .fits
                 .iter()
@@ -411,8 +443,8 @@ mod tests {
             let errors = mpjpe(&capture.skeleton, &tracked.poses, &capture.poses).unwrap();
             (rms.iter().sum::<f64>() / rms.len() as f64, errors)
         };
-        let (before, _) = track(1e-9);
-        let (after, errors) = track(1.0);
+        let (before, _) = track(1e-9, None);
+        let (after, errors) = track(1.0, None);
         // The body is the template under LBS with bone heat, the masks show DQS with bulges and
         // a skirt pushed out by the legs, so the outline cannot fit exactly. The refinement
         // must fit it better than the keypoints alone; it trades some joint accuracy for that
@@ -422,10 +454,34 @@ mod tests {
             after < before,
             "outline RMS {after} px after, {before} px before"
         );
-        let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+        let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
         assert!(
-            mean < 0.015 && errors.iter().all(|e| *e < 0.03),
+            mean(&errors) < 0.015 && errors.iter().all(|e| *e < 0.03),
             "{errors:?}"
+        );
+        // A body skinned with the deformer's own weights is closer to the masks' shape: the
+        // outline pulls the joints less far from the exact fit.
+        let (_, oracle_errors) = track(1.0, Some(&oracle));
+        assert!(
+            mean(&oracle_errors) < mean(&errors),
+            "oracle body {oracle_errors:?}, bone heat body {errors:?}"
+        );
+    }
+
+    #[test]
+    fn a_body_skin_that_does_not_fit_the_template_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let capture = tiny_capture(dir.path());
+        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
+            .unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        let joints = capture.skeleton.len();
+        let short = StaticSkin::from_dense(&vec![1.0 / joints as f32; 3 * joints], joints).unwrap();
+        let e =
+            track_capture(&capture, &TrackOptions::default(), Some(&short), |_| {}).unwrap_err();
+        assert!(
+            matches!(e, CaptureTrackError::BodySkin { vertices: 3, .. }),
+            "{e}"
         );
     }
 
