@@ -7,7 +7,7 @@ use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
 use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
 
 use super::kinematics::{Kinematics, Landmark};
-use super::silhouette::TrackingBody;
+use super::silhouette::{BodySkinMismatch, TrackingBody};
 use super::solve::{Detection, FrameFit, TrackError, TrackOptions, Tracker};
 use super::synthetic::{BODY_25_PAIRS, BUILT_IN_BODY_25, DetectionNoise, detect, noise_rng};
 use crate::template::hull::HullView;
@@ -39,20 +39,8 @@ pub enum CaptureTrackError {
     #[error("the silhouette term's body: {0}")]
     Body(#[from] crate::train::data::DataError),
     /// The weights given for the silhouette term's body do not fit the capture.
-    #[error(
-        "the silhouette term's body weights cover {vertices} vertices and {joints} joints, the \
-         template has {template_vertices} vertices and the skeleton {skeleton_joints} joints"
-    )]
-    BodySkin {
-        /// Vertices the weights cover.
-        vertices: usize,
-        /// Joints the weights cover.
-        joints: usize,
-        /// Template vertices.
-        template_vertices: usize,
-        /// Skeleton joints.
-        skeleton_joints: usize,
-    },
+    #[error(transparent)]
+    BodySkin(#[from] BodySkinMismatch),
     /// A mask has no outline for the silhouette term.
     #[error("frame {frame}, camera {camera}: mask: {source}")]
     Mask {
@@ -218,8 +206,8 @@ pub struct TrackedMotion {
 /// previous one when both belong to the same clip (the manifest's clips), otherwise from a
 /// heading search. The silhouette term's body is the template skinned with `body_skin` (one row
 /// per template vertex), or with the capture's initial weights (bone heat when it ships none)
-/// when `None`: a body whose skinning is closer to the truth biases the outline fit less, so a
-/// second pass with weights trained on the first pass's motion tracks better
+/// when `None`. A body closer to the truth biases the outline fit less (the true weights do, on
+/// CesiumMan); static weights learned from a first pass's motion did not
 /// (`docs/experiments/tracking.md`). `progress` is called after each frame.
 pub fn track_capture(
     capture: &Capture,
@@ -241,21 +229,11 @@ pub fn track_capture(
                 &initial
             }
         };
-        if skin.vertex_count() != capture.template.vertex_count()
-            || skin.joint_count() != capture.skeleton.len()
-        {
-            return Err(CaptureTrackError::BodySkin {
-                vertices: skin.vertex_count(),
-                joints: skin.joint_count(),
-                template_vertices: capture.template.vertex_count(),
-                skeleton_joints: capture.skeleton.len(),
-            });
-        }
         Some(TrackingBody::new(
             &capture.template,
             skin,
             &capture.skeleton,
-        ))
+        )?)
     } else {
         None
     };
@@ -378,6 +356,14 @@ mod tests {
         load_capture(dir).unwrap()
     }
 
+    /// [`tiny_capture`] with exact keypoints of its default landmark map written into it.
+    fn exact_keypoint_capture(dir: &std::path::Path) -> Capture {
+        let capture = tiny_capture(dir);
+        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
+            .unwrap();
+        load_capture(dir).unwrap()
+    }
+
     #[test]
     fn exact_keypoints_written_into_a_capture_track_back_to_its_motion() {
         let dir = tempfile::tempdir().unwrap();
@@ -423,10 +409,7 @@ mod tests {
     #[test]
     fn the_silhouette_refinement_explains_the_masks_and_keeps_an_exact_fit() {
         let dir = tempfile::tempdir().unwrap();
-        let capture = tiny_capture(dir.path());
-        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
-            .unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let capture = exact_keypoint_capture(dir.path());
         let oracle = capture.evaluation_true_weights().unwrap().unwrap();
         // A negligible weight measures the outline misfit of the keypoint fit itself.
         let track = |weight: f64, body: Option<&StaticSkin>| {
@@ -471,16 +454,16 @@ mod tests {
     #[test]
     fn a_body_skin_that_does_not_fit_the_template_is_refused() {
         let dir = tempfile::tempdir().unwrap();
-        let capture = tiny_capture(dir.path());
-        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
-            .unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let capture = exact_keypoint_capture(dir.path());
         let joints = capture.skeleton.len();
         let short = StaticSkin::from_dense(&vec![1.0 / joints as f32; 3 * joints], joints).unwrap();
         let e =
             track_capture(&capture, &TrackOptions::default(), Some(&short), |_| {}).unwrap_err();
         assert!(
-            matches!(e, CaptureTrackError::BodySkin { vertices: 3, .. }),
+            matches!(
+                e,
+                CaptureTrackError::BodySkin(BodySkinMismatch { vertices: 3, .. })
+            ),
             "{e}"
         );
     }

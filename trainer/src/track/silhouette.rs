@@ -36,6 +36,23 @@ pub const SILHOUETTE_SCALE_PX: f64 = 8.0;
 /// Influences per vertex.
 const INFLUENCES: usize = 4;
 
+/// Weights that do not fit the template and skeleton of a [`TrackingBody`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "the silhouette term's body weights cover {vertices} vertices and {joints} joints, the \
+     template has {template_vertices} vertices and the skeleton {skeleton_joints} joints"
+)]
+pub struct BodySkinMismatch {
+    /// Vertices the weights cover.
+    pub vertices: usize,
+    /// Joints the weights cover.
+    pub joints: usize,
+    /// Template vertices.
+    pub template_vertices: usize,
+    /// Skeleton joints.
+    pub skeleton_joints: usize,
+}
+
 /// The skinned template the silhouette term poses.
 #[derive(Clone, Debug)]
 pub struct TrackingBody {
@@ -47,9 +64,21 @@ pub struct TrackingBody {
 }
 
 impl TrackingBody {
-    /// The body of `template` bound to `skeleton` with `skin` (one row per template vertex).
-    #[must_use]
-    pub fn new(template: &Template, skin: &StaticSkin, skeleton: &Skeleton) -> Self {
+    /// The body of `template` bound to `skeleton` with `skin` (one row per template vertex,
+    /// one column per joint; anything else is refused).
+    pub fn new(
+        template: &Template,
+        skin: &StaticSkin,
+        skeleton: &Skeleton,
+    ) -> Result<Self, BodySkinMismatch> {
+        if skin.vertex_count() != template.vertex_count() || skin.joint_count() != skeleton.len() {
+            return Err(BodySkinMismatch {
+                vertices: skin.vertex_count(),
+                joints: skin.joint_count(),
+                template_vertices: template.vertex_count(),
+                skeleton_joints: skeleton.len(),
+            });
+        }
         let (body, source) = simplify_template(template, BODY_VERTICES);
         let (offsets, joints, weights) = (skin.offsets(), skin.joints(), skin.weights());
         let influences = source
@@ -69,7 +98,7 @@ impl TrackingBody {
                 out
             })
             .collect();
-        Self {
+        Ok(Self {
             rest: body.positions.iter().map(|p| p.as_dvec3()).collect(),
             table: EdgeTable::new(body.vertex_count(), &body.triangles),
             triangles: body.triangles,
@@ -79,7 +108,7 @@ impl TrackingBody {
                 .iter()
                 .map(|m| m.as_dmat4())
                 .collect(),
-        }
+        })
     }
 
     /// Vertex count.
@@ -149,7 +178,7 @@ mod tests {
         crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
         let capture = skinfield_formats::capture::load_capture(dir.path()).unwrap();
         let skin = crate::train::data::initial_weights(&capture).unwrap();
-        let body = TrackingBody::new(&capture.template, &skin, &capture.skeleton);
+        let body = TrackingBody::new(&capture.template, &skin, &capture.skeleton).unwrap();
         assert!((1000..=BODY_VERTICES).contains(&body.vertex_count()));
         let kinematics = Kinematics::new(&capture.skeleton);
         let mut worlds = vec![DMat4::IDENTITY; capture.skeleton.len()];
