@@ -35,7 +35,7 @@ mod attach;
 mod bones;
 mod laplacian;
 mod solve;
-mod weld;
+pub(crate) mod weld;
 
 use std::time::Instant;
 
