@@ -596,11 +596,30 @@ fn thousands(n: usize) -> String {
     out
 }
 
-fn check_cell(check: Option<&CheckSummary>) -> String {
+/// A worst-vertex check as a table cell; a failure also says by how much the row's worst vertex
+/// exceeded bone heat's on the frame where it did most, in cm and in percent of the character's
+/// `size` (file units, so that a spike reads differently from a millimetre).
+fn check_cell(check: Option<&CheckSummary>, size: f64) -> String {
     match check {
         None => "–".into(),
         Some(c) if c.failures.is_empty() => format!("yes ({} frames)", c.frames),
-        Some(c) => format!("**no**: {} of {} frames", c.failures.len(), c.frames),
+        Some(c) => {
+            let excess = c
+                .failures
+                .iter()
+                .map(|&(_, ours, initial)| ours - initial)
+                .fold(0.0, f64::max);
+            let percent = if size > 0.0 {
+                format!(", {:.2} % of size", excess / size)
+            } else {
+                String::new()
+            };
+            format!(
+                "**no**: {} of {} frames (by up to {excess:.2} cm{percent})",
+                c.failures.len(),
+                c.frames
+            )
+        }
     }
 }
 
@@ -693,8 +712,8 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
                 "| | | | | | ".to_string()
             };
             let check = match row.method.as_str() {
-                "ours" => check_cell(r.worst_vertex_ours.as_ref()),
-                "static" => check_cell(r.worst_vertex_static.as_ref()),
+                "ours" => check_cell(r.worst_vertex_ours.as_ref(), r.size),
+                "static" => check_cell(r.worst_vertex_static.as_ref(), r.size),
                 _ => "".into(),
             };
             let worst = |v: Option<f64>, digits: usize| {
@@ -729,7 +748,7 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
             md,
             "| {} | {ordering} | {} | {} |",
             r.name,
-            check_cell(r.worst_vertex_ours.as_ref()),
+            check_cell(r.worst_vertex_ours.as_ref(), r.size),
             r.error.as_deref().unwrap_or("")
         );
     }
@@ -801,4 +820,27 @@ fn write_tables(
             .with_context(|| doc_json.display().to_string())?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_worst_vertex_cell_says_by_how_much_a_row_failed() {
+        let failed = CheckSummary {
+            frames: 24,
+            failures: vec![(80, 1.01, 0.66), (88, 3.53, 3.29)],
+        };
+        assert_eq!(
+            check_cell(Some(&failed), 2.5),
+            "**no**: 2 of 24 frames (by up to 0.35 cm, 0.14 % of size)"
+        );
+        let passed = CheckSummary {
+            frames: 8,
+            failures: Vec::new(),
+        };
+        assert_eq!(check_cell(Some(&passed), 2.5), "yes (8 frames)");
+        assert_eq!(check_cell(None, 2.5), "–");
+    }
 }
