@@ -75,7 +75,7 @@ pub(super) fn bad(path: &Path, reason: impl Into<String>) -> CaptureError {
     }
 }
 
-fn read_capped(path: &Path) -> Result<Vec<u8>, CaptureError> {
+pub(super) fn read_capped(path: &Path) -> Result<Vec<u8>, CaptureError> {
     let io = |source| CaptureError::Io {
         file: path.to_owned(),
         source,
@@ -95,7 +95,17 @@ pub(super) fn decode_png(
     width: u32,
     height: u32,
 ) -> Result<image::DynamicImage, CaptureError> {
-    let bytes = read_capped(path)?;
+    decode_png_bytes(path, read_capped(path)?, width, height)
+}
+
+/// Decodes PNG `bytes` (read from `path`, which errors name) that must be `width × height`,
+/// with the decoder's allocation capped by that size.
+pub(super) fn decode_png_bytes(
+    path: &Path,
+    bytes: Vec<u8>,
+    width: u32,
+    height: u32,
+) -> Result<image::DynamicImage, CaptureError> {
     let mut reader = image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Png);
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_IMAGE_SIDE);
@@ -185,7 +195,17 @@ fn read_exr(path: &Path, width: u32, height: u32) -> Result<CaptureImage, Captur
 /// Reads a mask PNG that must be `width × height`: grey level / 255 (or / 65535 for 16-bit
 /// files) is the coverage, above one half is foreground.
 pub fn read_mask(path: &Path, width: u32, height: u32) -> Result<CaptureMask, CaptureError> {
-    let img = decode_png(path, width, height)?.to_luma16();
+    mask_from_png(path, read_capped(path)?, width, height)
+}
+
+/// [`read_mask`] on PNG `bytes` already in memory; `path` only names the source in errors.
+pub fn mask_from_png(
+    path: &Path,
+    bytes: Vec<u8>,
+    width: u32,
+    height: u32,
+) -> Result<CaptureMask, CaptureError> {
+    let img = decode_png_bytes(path, bytes, width, height)?.to_luma16();
     let coverage: Vec<f32> = img.pixels().map(|p| f32::from(p[0]) / 65535.0).collect();
     Ok(CaptureMask {
         width,
@@ -364,4 +384,65 @@ pub fn read_gt_positions(path: &Path, expected_vertices: usize) -> Result<Vec<Ve
         return Err(bad(path, format!("vertex {i} is not finite")));
     }
     Ok(positions)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An 8 × 6 mask with a coverage ramp, written by [`write_mask_png`], as bytes.
+    fn mask_bytes(dir: &Path) -> (Vec<u8>, Vec<f32>) {
+        let coverage: Vec<f32> = (0..48).map(|i| (i % 7) as f32 / 6.0).collect();
+        let path = dir.join("m.png");
+        write_mask_png(&path, 8, 6, &coverage).unwrap();
+        (std::fs::read(&path).unwrap(), coverage)
+    }
+
+    #[test]
+    fn a_mask_round_trips_to_its_8_bit_coverage() {
+        let dir = tempfile::tempdir().unwrap();
+        let (bytes, coverage) = mask_bytes(dir.path());
+        let mask = mask_from_png(Path::new("m.png"), bytes, 8, 6).unwrap();
+        for (read, written) in mask.coverage.iter().zip(&coverage) {
+            assert!(
+                (read - written).abs() <= 0.5 / 255.0 + 1e-6,
+                "{read} {written}"
+            );
+        }
+        // Inside is the 50 % level of the stored 8-bit coverage (an exact half is stored as 128).
+        let inside: Vec<bool> = coverage
+            .iter()
+            .map(|&c| (c * 255.0).round() / 255.0 > 0.5)
+            .collect();
+        assert_eq!(mask.inside, inside);
+    }
+
+    #[test]
+    fn a_mask_of_another_size_is_refused_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let (bytes, _) = mask_bytes(dir.path());
+        let e = mask_from_png(Path::new("cam0/f1.png"), bytes, 6, 8).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains("cam0/f1.png") && text.contains("8×6"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn every_truncated_prefix_of_a_mask_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let (bytes, _) = mask_bytes(dir.path());
+        let full = mask_from_png(Path::new("m.png"), bytes.clone(), 8, 6).unwrap();
+        // The last 12 bytes are the empty IEND chunk: the decoder has every pixel without it.
+        for n in 0..bytes.len() {
+            match mask_from_png(Path::new("cut.png"), bytes[..n].to_vec(), 8, 6) {
+                Err(e) => assert!(e.to_string().contains("cut.png"), "{n} bytes: {e}"),
+                Ok(read) => {
+                    assert!(n >= bytes.len() - 12, "{n} of {} bytes", bytes.len());
+                    assert_eq!(read, full);
+                }
+            }
+        }
+    }
 }

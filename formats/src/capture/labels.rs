@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use super::images::{bad, decode_png, write_png};
+use super::images::{bad, decode_png_bytes, read_capped, write_png};
 use super::{CaptureError, LabelsEntry};
 
 /// Label of a pixel whose colour is not in the palette (background).
@@ -56,8 +56,19 @@ pub fn read_labels(
     height: u32,
     entry: &LabelsEntry,
 ) -> Result<LabelImage, CaptureError> {
+    labels_from_png(path, read_capped(path)?, width, height, entry)
+}
+
+/// [`read_labels`] on PNG `bytes` already in memory; `path` only names the source in errors.
+pub fn labels_from_png(
+    path: &Path,
+    bytes: Vec<u8>,
+    width: u32,
+    height: u32,
+    entry: &LabelsEntry,
+) -> Result<LabelImage, CaptureError> {
     validate_palette(path, "palette", &entry.palette)?;
-    let img = decode_png(path, width, height)?.to_rgb8();
+    let img = decode_png_bytes(path, bytes, width, height)?.to_rgb8();
     let labels = img
         .pixels()
         .map(|p| {

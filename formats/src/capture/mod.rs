@@ -56,12 +56,13 @@ mod write;
 
 pub use convert::{transform_from_array, transform_to_array};
 pub use images::{
-    CaptureImage, CaptureMask, GT_MESH_MAGIC, linear_to_srgb, read_gt_positions, read_image,
-    read_mask, srgb_to_linear, write_gt_positions, write_image_exr, write_image_png,
+    CaptureImage, CaptureMask, GT_MESH_MAGIC, linear_to_srgb, mask_from_png, read_gt_positions,
+    read_image, read_mask, srgb_to_linear, write_gt_positions, write_image_exr, write_image_png,
     write_mask_png,
 };
 pub use labels::{
-    LabelImage, MAX_PARTS, NO_LABEL, read_labels, validate_palette, write_labels_png,
+    LabelImage, MAX_PARTS, NO_LABEL, labels_from_png, read_labels, validate_palette,
+    write_labels_png,
 };
 pub use schema::{
     CameraEntry, CaptureManifest, ClipEntry, DofsEntry, EvaluationEntry, ImageFormat, JointEntry,
