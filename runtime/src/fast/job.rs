@@ -14,7 +14,7 @@ use super::{Influence, MAX_INFLUENCES};
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, VertexOutputs, WeightsJob};
-use crate::kernels::{blend, softmax8};
+use crate::kernels::{TILE, blend, softmax_tile, softmax8};
 use crate::model::SkinNet;
 use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
 
@@ -161,19 +161,9 @@ impl FastFrame {
         v: usize,
         out: &mut [Influence; MAX_INFLUENCES],
     ) -> usize {
-        let j = self.joints;
-        let (base, base_log) = (mesh.base_of(v), mesh.base_log_of(v));
-        let interp = mesh.interp_of(v);
-        // Unused slots stay −∞: weight 0.
+        let base = mesh.base_of(v);
         let mut t = [f32::NEG_INFINITY; MAX_INFLUENCES];
-        for ((tb, b), &lb) in t.iter_mut().zip(base).zip(base_log) {
-            let joint = b.index as usize;
-            let change: f32 = interp
-                .iter()
-                .map(|a| a.weight * self.log_changes[a.index as usize * j + joint])
-                .sum();
-            *tb = lb + change;
-        }
+        self.base_logits(mesh, v, &mut t);
         // Normalised exponentials with the softmax's tail rule: below e^-72 of the strongest is
         // exactly zero, so no subnormal float reaches the matrix blends.
         softmax8(mesh.kernel(), &mut t);
@@ -184,6 +174,24 @@ impl FastFrame {
             };
         }
         base.len()
+    }
+
+    /// The logits of vertex `v`'s base weights before their softmax, `ln B_vb + Σ_i a_vi ·
+    /// L_{n_i, j_b}`, into `t` in base order; slots past its base are left as they are (callers
+    /// pass −∞: weight 0).
+    #[inline]
+    pub(crate) fn base_logits(&self, mesh: &FastMesh, v: usize, t: &mut [f32; MAX_INFLUENCES]) {
+        let j = self.joints;
+        let (base, base_log) = (mesh.base_of(v), mesh.base_log_of(v));
+        let interp = mesh.interp_of(v);
+        for ((tb, b), &lb) in t.iter_mut().zip(base).zip(base_log) {
+            let joint = b.index as usize;
+            let change: f32 = interp
+                .iter()
+                .map(|a| a.weight * self.log_changes[a.index as usize * j + joint])
+                .sum();
+            *tb = lb + change;
+        }
     }
 
     /// The fast path's weights of vertex `v` into `out` (`J` floats, dense).
@@ -287,6 +295,10 @@ impl FastSkinJob<'_> {
     /// Validates, then skins the range. Never allocates.
     pub fn run(&mut self) -> Result<(), RuntimeError> {
         self.validate()?;
+        if self.method == Method::Lbs && self.mesh.options().base_influences > 0 {
+            self.run_lbs_tiled();
+            return Ok(());
+        }
         let (mesh, nodes) = (self.mesh, self.nodes);
         let j = mesh.joint_count();
         let palette = self.frame.palette();
@@ -298,35 +310,21 @@ impl FastSkinJob<'_> {
         let strongest = &mut strongest[..self.influences];
         let kernel = mesh.kernel();
         let node_mats = nodes.node_matrices();
-        let with_base = mesh.options().base_influences > 0;
-        let mut entries = [Influence::default(); MAX_INFLUENCES];
-        let mut base_len = 0;
         for i in 0..self.out_positions.len() {
             let v = self.first_vertex + i;
             match self.method {
                 Method::Lbs => {
-                    // With a base, w_v lives on the base joints: `base_influences` blends.
-                    // Without one, LBS is linear in the convex node weights: the nodes'
-                    // blended matrices give Σ_j w_vj M_j in `neighbours` blends.
+                    // Without a base (with one, `run_lbs_tiled`), LBS is linear in the convex
+                    // node weights: the nodes' blended matrices give Σ_j w_vj M_j in
+                    // `neighbours` blends.
                     let mut m = Mat4::ZERO;
-                    if with_base {
-                        base_len = nodes.base_weights(mesh, v, &mut entries);
-                        let base = entries[..base_len].iter();
-                        blend(
-                            kernel,
-                            &mut m,
-                            mats,
-                            base.map(|b| (b.index as usize, b.weight)),
-                        );
-                    } else {
-                        let interp = mesh.interp_of(v).iter();
-                        blend(
-                            kernel,
-                            &mut m,
-                            node_mats,
-                            interp.map(|a| (a.index as usize, a.weight)),
-                        );
-                    }
+                    let interp = mesh.interp_of(v).iter();
+                    blend(
+                        kernel,
+                        &mut m,
+                        node_mats,
+                        interp.map(|a| (a.index as usize, a.weight)),
+                    );
                     self.out_positions[i] = m.transform_point3(rest[v]);
                     if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals)
                     {
@@ -359,14 +357,72 @@ impl FastSkinJob<'_> {
                 let o = &mut o[i * j..(i + 1) * j];
                 match self.method {
                     Method::Dqs => o.copy_from_slice(dense),
-                    Method::Lbs if with_base => {
-                        o.fill(0.0);
-                        scatter(&entries[..base_len], o);
-                    }
                     Method::Lbs => nodes.dense_weights(mesh, v, o),
                 }
             }
         }
         Ok(())
+    }
+
+    /// LBS with a base, [`TILE`] vertices at a time: the tile's base logits first, then one
+    /// softmax over the tile's columns, then the blends. Vertex by vertex, each softmax waited
+    /// on its own horizontal maximum and sum (a latency chain the core could not overlap with
+    /// the next vertex's); across a tile the exponentials are independent vectors. Each column
+    /// is computed on its own, so a vertex's result does not depend on the tile it falls in.
+    fn run_lbs_tiled(&mut self) {
+        let (mesh, nodes) = (self.mesh, self.nodes);
+        let j = mesh.joint_count();
+        let mats = self.frame.palette().matrices();
+        let rest = mesh.rest_positions();
+        let kernel = mesh.kernel();
+        let rows = mesh.options().base_influences.clamp(1, MAX_INFLUENCES);
+        let mut logits = [0.0f32; MAX_INFLUENCES * TILE];
+        let count = self.out_positions.len();
+        let mut start = 0;
+        while start < count {
+            let len = TILE.min(count - start);
+            for k in 0..TILE {
+                let mut t = [f32::NEG_INFINITY; MAX_INFLUENCES];
+                if k < len {
+                    nodes.base_logits(mesh, self.first_vertex + start + k, &mut t);
+                } else {
+                    // A column past the range: one finite logit keeps its softmax finite.
+                    t[0] = 0.0;
+                }
+                for (b, &x) in t.iter().enumerate().take(rows) {
+                    logits[b * TILE + k] = x;
+                }
+            }
+            softmax_tile(kernel, &mut logits, rows);
+            for k in 0..len {
+                let (i, v) = (start + k, self.first_vertex + start + k);
+                let base = mesh.base_of(v);
+                let weight = |b: usize| logits[b * TILE + k];
+                let mut m = Mat4::ZERO;
+                blend(
+                    kernel,
+                    &mut m,
+                    mats,
+                    base.iter()
+                        .enumerate()
+                        .map(|(b, e)| (e.index as usize, weight(b))),
+                );
+                self.out_positions[i] = m.transform_point3(rest[v]);
+                if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals) {
+                    o[i] = lbs_normal(&m, r[v]);
+                }
+                if let (Some(o), Some(r)) = (self.out_tangents.as_deref_mut(), self.rest_tangents) {
+                    o[i] = lbs_tangent(&m, r[v]);
+                }
+                if let Some(o) = self.out_weights.as_deref_mut() {
+                    let o = &mut o[i * j..(i + 1) * j];
+                    o.fill(0.0);
+                    for (b, e) in base.iter().enumerate() {
+                        o[e.index as usize] += weight(b);
+                    }
+                }
+            }
+            start += len;
+        }
     }
 }
