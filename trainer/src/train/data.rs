@@ -280,6 +280,18 @@ pub fn train_data(
 mod tests {
     use super::*;
 
+    /// `simplified`'s vertex `k` is `original`'s vertex `source[k]`: same position, same part.
+    fn assert_subset_of(simplified: &Template, source: &[u32], original: &Template) {
+        assert_eq!(source.len(), simplified.vertex_count());
+        for (k, &s) in source.iter().enumerate() {
+            assert_eq!(simplified.positions[k], original.positions[s as usize]);
+            assert_eq!(
+                simplified.part_labels.as_ref().unwrap()[k],
+                original.part_labels.as_ref().unwrap()[s as usize]
+            );
+        }
+    }
+
     #[test]
     fn simplified_template_is_a_subset_with_its_attributes() {
         let cfg = crate::synth::SynthConfig::tiny();
@@ -293,14 +305,7 @@ mod tests {
             r.vertex_count(),
             t.vertex_count()
         );
-        assert_eq!(source.len(), r.vertex_count());
-        for (k, &s) in source.iter().enumerate() {
-            assert_eq!(r.positions[k], t.positions[s as usize]);
-            assert_eq!(
-                r.part_labels.as_ref().unwrap()[k],
-                t.part_labels.as_ref().unwrap()[s as usize]
-            );
-        }
+        assert_subset_of(&r, &source, t);
         let (same, identity) = simplify_template(t, 0);
         assert_eq!(same, *t);
         assert_eq!(identity.len(), t.vertex_count());
@@ -349,14 +354,7 @@ mod tests {
             "{} vertices for a target of {target}",
             r.vertex_count()
         );
-        assert_eq!(source.len(), r.vertex_count());
-        for (k, &s) in source.iter().enumerate() {
-            assert_eq!(r.positions[k], split.positions[s as usize]);
-            assert_eq!(
-                r.part_labels.as_ref().unwrap()[k],
-                split.part_labels.as_ref().unwrap()[s as usize]
-            );
-        }
+        assert_subset_of(&r, &source, &split);
         // Welded, the split mesh is the original one again: as many vertices and triangles.
         let (welded, representative) = weld_template(&split).unwrap();
         assert_eq!(welded.vertex_count(), t.vertex_count());
