@@ -201,7 +201,10 @@ impl FastFrame {
         if mesh.options().base_influences > 0 {
             let mut entries = [Influence::default(); MAX_INFLUENCES];
             let len = self.base_weights(mesh, v, &mut entries);
-            scatter(&entries[..len], out);
+            scatter(
+                entries[..len].iter().map(|e| (e.index as usize, e.weight)),
+                out,
+            );
         } else {
             for a in mesh.interp_of(v) {
                 let n = a.index as usize;
@@ -214,9 +217,9 @@ impl FastFrame {
 }
 
 /// Adds sparse `(joint, weight)` entries into dense weights `out`.
-fn scatter(entries: &[Influence], out: &mut [f32]) {
-    for e in entries {
-        out[e.index as usize] += e.weight;
+fn scatter(entries: impl Iterator<Item = (usize, f32)>, out: &mut [f32]) {
+    for (joint, weight) in entries {
+        out[joint] += weight;
     }
 }
 
@@ -325,16 +328,7 @@ impl FastSkinJob<'_> {
                         node_mats,
                         interp.map(|a| (a.index as usize, a.weight)),
                     );
-                    self.out_positions[i] = m.transform_point3(rest[v]);
-                    if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals)
-                    {
-                        o[i] = lbs_normal(&m, r[v]);
-                    }
-                    if let (Some(o), Some(r)) =
-                        (self.out_tangents.as_deref_mut(), self.rest_tangents)
-                    {
-                        o[i] = lbs_tangent(&m, r[v]);
-                    }
+                    self.write_lbs(i, v, &m);
                 }
                 Method::Dqs => {
                     let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
@@ -364,6 +358,19 @@ impl FastSkinJob<'_> {
         Ok(())
     }
 
+    /// Output `i` of vertex `v` skinned with the blended matrix `m`: its position, and its
+    /// normal and tangent where the job asks for them.
+    #[inline]
+    fn write_lbs(&mut self, i: usize, v: usize, m: &Mat4) {
+        self.out_positions[i] = m.transform_point3(self.mesh.rest_positions()[v]);
+        if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals) {
+            o[i] = lbs_normal(m, r[v]);
+        }
+        if let (Some(o), Some(r)) = (self.out_tangents.as_deref_mut(), self.rest_tangents) {
+            o[i] = lbs_tangent(m, r[v]);
+        }
+    }
+
     /// LBS with a base, [`TILE`] vertices at a time: the tile's base logits first, then one
     /// softmax over the tile's columns, then the blends. Vertex by vertex, each softmax waited
     /// on its own horizontal maximum and sum (a latency chain the core could not overlap with
@@ -373,9 +380,8 @@ impl FastSkinJob<'_> {
         let (mesh, nodes) = (self.mesh, self.nodes);
         let j = mesh.joint_count();
         let mats = self.frame.palette().matrices();
-        let rest = mesh.rest_positions();
         let kernel = mesh.kernel();
-        let rows = mesh.options().base_influences.clamp(1, MAX_INFLUENCES);
+        let rows = mesh.options().base_influences.min(MAX_INFLUENCES);
         let mut logits = [0.0f32; MAX_INFLUENCES * TILE];
         let count = self.out_positions.len();
         let mut start = 0;
@@ -396,30 +402,15 @@ impl FastSkinJob<'_> {
             softmax_tile(kernel, &mut logits, rows);
             for k in 0..len {
                 let (i, v) = (start + k, self.first_vertex + start + k);
-                let base = mesh.base_of(v);
-                let weight = |b: usize| logits[b * TILE + k];
+                let base = mesh.base_of(v).iter().enumerate();
+                let weights = base.map(|(b, e)| (e.index as usize, logits[b * TILE + k]));
                 let mut m = Mat4::ZERO;
-                blend(
-                    kernel,
-                    &mut m,
-                    mats,
-                    base.iter()
-                        .enumerate()
-                        .map(|(b, e)| (e.index as usize, weight(b))),
-                );
-                self.out_positions[i] = m.transform_point3(rest[v]);
-                if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals) {
-                    o[i] = lbs_normal(&m, r[v]);
-                }
-                if let (Some(o), Some(r)) = (self.out_tangents.as_deref_mut(), self.rest_tangents) {
-                    o[i] = lbs_tangent(&m, r[v]);
-                }
+                blend(kernel, &mut m, mats, weights.clone());
+                self.write_lbs(i, v, &m);
                 if let Some(o) = self.out_weights.as_deref_mut() {
                     let o = &mut o[i * j..(i + 1) * j];
                     o.fill(0.0);
-                    for (b, e) in base.iter().enumerate() {
-                        o[e.index as usize] += weight(b);
-                    }
+                    scatter(weights, o);
                 }
             }
             start += len;

@@ -20,7 +20,7 @@ use serde::Serialize;
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::skf::write_atomic;
 use skinfield_trainer::eval::{
-    EvalOptions, EvalRow, Skinning, WorstVertexCheck, evaluate, worst_vertex_check,
+    EvalOptions, EvalRow, Skinning, WorstVertexCheck, evaluate, percent_of_size, worst_vertex_check,
 };
 use skinfield_trainer::synth::{
     GltfSource, SynthConfig, SynthSummary, TestMotions, synthesize, synthesize_gltf,
@@ -610,7 +610,7 @@ fn check_cell(check: Option<&CheckSummary>, size: f64) -> String {
                 .map(|&(_, ours, initial)| ours - initial)
                 .fold(0.0, f64::max);
             let percent = if size > 0.0 {
-                format!(", {:.2} % of size", excess / size)
+                format!(", {:.2} % of size", percent_of_size(excess, size))
             } else {
                 String::new()
             };

@@ -541,6 +541,14 @@ pub fn character_size(template: &Template) -> f64 {
         .map_or(0.0, |b| f64::from(b.size().length()))
 }
 
+/// `cm` as a percentage of a character of `size` model units ([`character_size`]); 0 for a
+/// character without size. Model units are taken as metres (cm → units is ÷ 100, a percentage
+/// is × 100: the two cancel), the convention of every `cm` column.
+#[must_use]
+pub fn percent_of_size(cm: f64, size: f64) -> f64 {
+    if size > 0.0 { cm / size } else { 0.0 }
+}
+
 /// Averages per-frame metrics into a table row; `size` is the character's size
 /// ([`character_size`], model units) for the relative columns.
 #[must_use]
@@ -553,8 +561,7 @@ pub fn average(method: &str, frames: &[FrameMetrics], size: f64) -> EvalRow {
         .map(|f| f.max_vertex_cm)
         .collect::<Option<Vec<f64>>>()
         .map(|v| v.into_iter().fold(0.0f64, f64::max));
-    // cm → model units is ÷ 100; a percentage of the size is × 100: the two cancel.
-    let percent = |cm: f64| if size > 0.0 { cm / size } else { 0.0 };
+    let percent = |cm: f64| percent_of_size(cm, size);
     EvalRow {
         method: method.to_string(),
         chamfer_cm: m2s + s2m,

@@ -18,6 +18,9 @@ pub(crate) struct Welded {
     pub triangles: Vec<[u32; 3]>,
     /// Welded vertex of every input vertex.
     pub of_input: Vec<u32>,
+    /// Input vertex each welded vertex was made from (the first of its copies; the others
+    /// merged into it).
+    pub representative: Vec<u32>,
     /// Triangles that collapsed (two corners welded together) and were dropped.
     pub collapsed_triangles: usize,
     /// Triangles that repeated an earlier one (same three welded corners) and were dropped.
@@ -40,7 +43,8 @@ pub(crate) fn weld(positions: &[Vec3], triangles: &[[u32; 3]], tolerance: f64) -
     let mut welded: Vec<DVec3> = Vec::with_capacity(positions.len());
     let mut of_input = Vec::with_capacity(positions.len());
     let tol2 = tolerance * tolerance;
-    for p in positions {
+    let mut representative = Vec::new();
+    for (i, p) in positions.iter().enumerate() {
         let p = p.as_dvec3();
         let k = key(p);
         let mut found = None;
@@ -66,6 +70,7 @@ pub(crate) fn weld(positions: &[Vec3], triangles: &[[u32; 3]], tolerance: f64) -
         let w = found.unwrap_or_else(|| {
             let w = welded.len() as u32;
             welded.push(p);
+            representative.push(i as u32);
             grid.entry(k).or_default().push(w);
             w
         });
@@ -92,6 +97,7 @@ pub(crate) fn weld(positions: &[Vec3], triangles: &[[u32; 3]], tolerance: f64) -
         positions: welded,
         triangles: tris,
         of_input,
+        representative,
         collapsed_triangles: collapsed,
         duplicate_triangles: duplicate,
     }
@@ -164,6 +170,8 @@ mod tests {
         let w = weld(&p, &t, 1e-5);
         assert_eq!(w.positions.len(), 4);
         assert_eq!(w.of_input, vec![0, 1, 2, 1, 2, 3, 0]);
+        // Each welded vertex comes from the first of its copies.
+        assert_eq!(w.representative, vec![0, 1, 2, 5]);
         assert_eq!(w.triangles, vec![[0, 1, 2], [1, 3, 2]]);
         assert_eq!((w.collapsed_triangles, w.duplicate_triangles), (1, 1));
         // Exact welding keeps the 1e-7 offset apart.

@@ -130,20 +130,23 @@ pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u
     }
     // The capture loader validated the template and the target is below its count, so the
     // simplifier has nothing to refuse; an invalid template trains at full resolution.
-    let direct = match simplify(template, Target::Vertices(target)) {
-        Ok(r) => (r.template, r.source.iter().map(|p| p.vertices[0]).collect()),
-        Err(_) => identity(),
+    let simplified = |t: &Template| {
+        simplify(t, Target::Vertices(target)).ok().map(|r| {
+            let source: Vec<u32> = r.source.iter().map(|p| p.vertices[0]).collect();
+            (r.template, source)
+        })
     };
+    let direct = simplified(template).unwrap_or_else(identity);
     if direct.1.len() as f64 <= target as f64 * SEAM_SLACK {
         return direct;
     }
     let Some((welded, representative)) = weld_template(template) else {
         return direct;
     };
-    let (simplified, source): (Template, Vec<u32>) = if welded.vertex_count() > target {
-        match simplify(&welded, Target::Vertices(target)) {
-            Ok(r) => (r.template, r.source.iter().map(|p| p.vertices[0]).collect()),
-            Err(_) => return direct,
+    let (simplified, source) = if welded.vertex_count() > target {
+        match simplified(&welded) {
+            Some(r) => r,
+            None => return direct,
         }
     } else {
         let all = (0..welded.vertex_count() as u32).collect();
@@ -165,12 +168,7 @@ pub const SEAM_SLACK: f64 = 1.25;
 #[must_use]
 pub fn weld_template(template: &Template) -> Option<(Template, Vec<u32>)> {
     let welded = crate::heat::weld::weld(&template.positions, &template.triangles, 0.0);
-    let mut representative = vec![u32::MAX; welded.positions.len()];
-    for (i, &w) in welded.of_input.iter().enumerate() {
-        if representative[w as usize] == u32::MAX {
-            representative[w as usize] = i as u32;
-        }
-    }
+    let representative = welded.representative;
     let positions: Vec<glam::Vec3> = representative
         .iter()
         .map(|&i| template.positions[i as usize])
