@@ -101,7 +101,7 @@ struct Base {
 }
 
 // The weights of vertex `v` on its base joints (base order; requires a base):
-// B_vb · exp(Σ_i a_vi L_{n_i, j_b}), renormalised (as `FastFrame::base_weights` on the CPU).
+// B_vb · exp(Σ_i a_vi L_{n_i, j_b}), renormalised (as `FastFrame::base_tile` on the CPU).
 fn base_weights(v: u32) -> Base {
     var out: Base;
     let first = v * vertex_stride();
@@ -157,17 +157,9 @@ fn fast_skin_lbs(
     skinned[v] = lbs_vertex(m, v);
 }
 
-// Weight of joint `j` in w_v (`base`: `base_weights(v)` when there is a base).
-fn dense_weight(v: u32, j: u32, base: Base) -> f32 {
+// Weight of joint `j` in w_v without a base (the convex combination of its nodes' weights).
+fn convex_weight(v: u32, j: u32) -> f32 {
     var w = 0.0;
-    if fast.base_count > 0u {
-        for (var b = 0u; b < fast.base_count; b++) {
-            if base.index[b] == j {
-                w += base.weight[b];
-            }
-        }
-        return w;
-    }
     let first = v * vertex_stride();
     let j_count = fast.joint_count;
     for (var i = 0u; i < fast.neighbours; i++) {
@@ -182,29 +174,70 @@ struct Top {
     weight: array<f32, 8>,
 }
 
+// Offers joint `j` with weight `w` to the `k` strongest kept in `top` (`len` filled, strongest
+// first); candidates come in joint order and a later one must be strictly larger to displace an
+// earlier one.
+fn offer(top: ptr<function, Top>, len: ptr<function, u32>, k: u32, j: u32, w: f32) {
+    if *len == k && w <= (*top).weight[k - 1u] {
+        return;
+    }
+    var at = min(*len, k - 1u);
+    while at > 0u && (*top).weight[at - 1u] < w {
+        (*top).index[at] = (*top).index[at - 1u];
+        (*top).weight[at] = (*top).weight[at - 1u];
+        at -= 1u;
+    }
+    (*top).index[at] = j;
+    (*top).weight[at] = w;
+    *len = min(*len + 1u, k);
+}
+
 // The `k` strongest joints of w_v, strongest first (ties: lower joint first), negatives clamped
-// to zero, renormalised (as `strongest_influences` on the CPU).
+// to zero, renormalised (as `strongest_influences` on the CPU). With a base only its joints are
+// offered (as `strongest_sparse`): the other joints weigh zero and fill any remaining slots in
+// joint order, which is what a selection over all joints gives, at the cost of the base.
 fn strongest(v: u32, k: u32) -> Top {
     var top: Top;
     var len = 0u;
-    var base: Base;
     if fast.base_count > 0u {
-        base = base_weights(v);
-    }
-    for (var j = 0u; j < fast.joint_count; j++) {
-        let w = dense_weight(v, j, base);
-        if len == k && w <= top.weight[k - 1u] {
-            continue;
+        let base = base_weights(v);
+        // The positive base entries in joint order, so ties resolve as over all joints.
+        var pj: array<u32, 8>;
+        var pw: array<f32, 8>;
+        var n = 0u;
+        for (var b = 0u; b < fast.base_count; b++) {
+            if base.weight[b] > 0.0 {
+                var at = n;
+                while at > 0u && pj[at - 1u] > base.index[b] {
+                    pj[at] = pj[at - 1u];
+                    pw[at] = pw[at - 1u];
+                    at -= 1u;
+                }
+                pj[at] = base.index[b];
+                pw[at] = base.weight[b];
+                n += 1u;
+            }
         }
-        var at = min(len, k - 1u);
-        while at > 0u && top.weight[at - 1u] < w {
-            top.index[at] = top.index[at - 1u];
-            top.weight[at] = top.weight[at - 1u];
-            at -= 1u;
+        for (var i = 0u; i < n; i++) {
+            offer(&top, &len, k, pj[i], pw[i]);
         }
-        top.index[at] = j;
-        top.weight[at] = w;
-        len = min(len + 1u, k);
+        var j = 0u;
+        while len < k && j < fast.joint_count {
+            var taken = false;
+            for (var i = 0u; i < n; i++) {
+                taken = taken || pj[i] == j;
+            }
+            if !taken {
+                top.index[len] = j;
+                top.weight[len] = 0.0;
+                len += 1u;
+            }
+            j += 1u;
+        }
+    } else {
+        for (var j = 0u; j < fast.joint_count; j++) {
+            offer(&top, &len, k, j, convex_weight(v, j));
+        }
     }
     var sum = 0.0;
     for (var i = 0u; i < k; i++) {

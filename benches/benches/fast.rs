@@ -7,7 +7,8 @@
 //! `FastFrame::update` + `FastSkinJob` (LBS, default options; `fast_dqs`: DQS over 4 joints);
 //! top-k = `set_pose` + `update` + `TopKJob` (K = 4, u8 indices, unorm8 weights, no skinning);
 //! static = `Palette::set_pose` + `StaticSkinJob` (LBS over 4 influences per vertex). A node
-//! sweep at 10k vertices times the fast frame for N = 64 … 1024. Bind times are printed.
+//! sweep at 10k vertices times the fast frame for N = 64 … 1024, and an options sweep at 10k and
+//! 50k times it for N = 128 / 256 nodes × 4 / 8 base influences. Bind times are printed.
 //!
 //! After criterion's report a table of the ratios is printed from its estimates
 //! (`docs/experiments/fast-path.md` comes from this).
@@ -29,6 +30,9 @@ use skinfield_runtime::{
 const SIZES: [usize; 3] = [1_000, 10_000, 50_000];
 const SWEEP_SIZE: usize = 10_000;
 const SWEEP_NODES: [usize; 5] = [64, 128, 256, 512, 1024];
+/// Sizes whose fast frame is also timed for every (nodes, base influences) pair below.
+const OPTION_SIZES: [usize; 2] = [10_000, 50_000];
+const OPTION_PAIRS: [(usize, usize); 4] = [(128, 4), (128, 8), (256, 4), (256, 8)];
 const JOINTS: u32 = 24;
 
 /// An ellipsoid with about `n` vertices.
@@ -207,6 +211,26 @@ fn benches(c: &mut Criterion) {
             })
         });
         g.finish();
+        if OPTION_SIZES.contains(&n) {
+            let mut g = c.benchmark_group(format!("fast_options_{n}"));
+            g.throughput(Throughput::Elements(v as u64));
+            g.sample_size(10).sampling_mode(SamplingMode::Flat);
+            for (nodes_n, base) in OPTION_PAIRS {
+                let options = FastOptions {
+                    nodes: nodes_n,
+                    base_influences: base,
+                    ..FastOptions::DEFAULT
+                };
+                let mesh =
+                    FastMesh::bind(&s.model, &s.positions, &s.triangles, &options).expect("bind");
+                let mut fr = FastFrame::new(&mesh);
+                let id = format!("n{nodes_n}_b{base}");
+                g.bench_function(BenchmarkId::new("fast", id), |bn| {
+                    bn.iter(|| fast_frame(&s, &mesh, &mut fr, &mut b, Method::Lbs))
+                });
+            }
+            g.finish();
+        }
         if n != SWEEP_SIZE {
             continue;
         }
@@ -293,6 +317,27 @@ fn table() {
             &nodes.to_string(),
         ]) {
             println!("| {nodes} | {:.3} |", t * 1e3);
+        }
+    }
+    println!(
+        "\n| vertices, nodes N | base influences | static LBS-4 ms | fast ms | fast / static |"
+    );
+    println!("|---|---|---|---|---|");
+    for n in OPTION_SIZES {
+        let Some(st) = mean_s(&[&format!("fast_{n}"), "static_lbs4"]) else {
+            continue;
+        };
+        for (nodes, base) in OPTION_PAIRS {
+            let id = format!("n{nodes}_b{base}");
+            if let Some(t) = mean_s(&[&format!("fast_options_{n}"), "fast", &id]) {
+                println!(
+                    "| {} vertices, {nodes} | {base} | {:.3} | {:.3} | {:.2}× |",
+                    mesh(n).0.len(),
+                    st * 1e3,
+                    t * 1e3,
+                    t / st
+                );
+            }
         }
     }
 }

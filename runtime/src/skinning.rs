@@ -1,7 +1,7 @@
 //! Blending joint transforms per vertex: linear blend skinning and dual-quaternion skinning
 //! (Kavan et al. 2007), for positions, normals and tangents.
 
-use glam::{Mat3, Mat4, Quat, Vec3, Vec4};
+use glam::{Mat3A, Mat4, Quat, Vec3, Vec3A, Vec4};
 
 /// How joint transforms are blended.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -51,14 +51,17 @@ impl DualQuat {
 }
 
 /// Cofactor matrix of `m`'s upper 3×3: `det(m) · m⁻ᵀ`, the normal transform that stays defined
-/// for singular blends and keeps orientation under mirroring.
-fn cofactor(m: &Mat4) -> Mat3 {
+/// for singular blends and keeps orientation under mirroring. In the 16-byte vector types
+/// (`Vec3A`), whose cross products and dot products are SIMD shuffles where the target has
+/// them: the per-vertex tail of every LBS job (perf put the 12-byte-`Vec3` version at a third
+/// of the fast path's per-vertex time). Same products, same summation order as the scalar form.
+fn cofactor(m: &Mat4) -> Mat3A {
     let (c0, c1, c2) = (
-        m.x_axis.truncate(),
-        m.y_axis.truncate(),
-        m.z_axis.truncate(),
+        Vec3A::from_vec4(m.x_axis),
+        Vec3A::from_vec4(m.y_axis),
+        Vec3A::from_vec4(m.z_axis),
     );
-    Mat3::from_cols(c1.cross(c2), c2.cross(c0), c0.cross(c1))
+    Mat3A::from_cols(c1.cross(c2), c2.cross(c0), c0.cross(c1))
 }
 
 /// A skinned vertex.
@@ -89,24 +92,65 @@ pub(crate) fn lbs(
 /// Applies a blended skinning matrix to a position, normal (cofactor) and tangent.
 pub(crate) fn apply_matrix(m: &Mat4, p: Vec3, n: Vec3, t: Vec4) -> Skinned {
     Skinned {
-        position: m.transform_point3(p),
+        position: lbs_point(m, p),
         normal: lbs_normal(m, n),
         tangent: lbs_tangent(m, t),
     }
 }
 
+/// A position under a blended skinning matrix (affine: the matrix's last row is ignored).
+#[inline]
+pub(crate) fn lbs_point(m: &Mat4, p: Vec3) -> Vec3 {
+    Vec3::from(m.transform_point3a(Vec3A::from(p)))
+}
+
 /// A normal under a blended skinning matrix (cofactor: right for non-rigid blends).
 #[inline]
 pub(crate) fn lbs_normal(m: &Mat4, n: Vec3) -> Vec3 {
-    (cofactor(m) * n).normalize_or_zero()
+    unit(lbs_normal_unnormalised(m, n))
+}
+
+/// [`lbs_normal`] before its normalisation. Jobs that skin many vertices write this and call
+/// [`normalise_normals`] on a block afterwards: a normalisation is a square root and a division
+/// that each wait on the last, and done vertex by vertex that chain stalled the next vertex's
+/// blend (a fifth of the fast path's per-vertex samples sat on it); over a block the chains are
+/// independent. The result is the same to the bit.
+#[inline]
+pub(crate) fn lbs_normal_unnormalised(m: &Mat4, n: Vec3) -> Vec3 {
+    Vec3::from(cofactor(m) * Vec3A::from(n))
 }
 
 /// A tangent under a blended skinning matrix, handedness `w` kept.
 #[inline]
 pub(crate) fn lbs_tangent(m: &Mat4, t: Vec4) -> Vec4 {
-    m.transform_vector3(t.truncate())
-        .normalize_or_zero()
-        .extend(t.w)
+    let u = lbs_tangent_unnormalised(m, t);
+    unit(u.truncate()).extend(u.w)
+}
+
+/// [`lbs_tangent`] before its normalisation (see [`lbs_normal_unnormalised`]).
+#[inline]
+pub(crate) fn lbs_tangent_unnormalised(m: &Mat4, t: Vec4) -> Vec4 {
+    Vec3::from(m.transform_vector3a(Vec3A::from_vec4(t))).extend(t.w)
+}
+
+/// `v` scaled to unit length, or zero where that is not finite.
+#[inline]
+fn unit(v: Vec3) -> Vec3 {
+    Vec3::from(Vec3A::from(v).normalize_or_zero())
+}
+
+/// Normalises a block of [`lbs_normal_unnormalised`] outputs in place.
+pub(crate) fn normalise_normals(normals: &mut [Vec3]) {
+    for n in normals {
+        *n = unit(*n);
+    }
+}
+
+/// Normalises a block of [`lbs_tangent_unnormalised`] outputs in place (`w` kept).
+pub(crate) fn normalise_tangents(tangents: &mut [Vec4]) {
+    for t in tangents {
+        *t = unit(t.truncate()).extend(t.w);
+    }
 }
 
 /// DQS of one vertex; falls back to LBS where the blended rotation vanishes (weights that

@@ -7,8 +7,11 @@ use skinfield_formats::StaticSkin;
 use crate::error::RuntimeError;
 use crate::frame::Palette;
 use crate::job::VertexOutputs;
-use crate::kernels::{Kernel, blend};
-use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
+use crate::kernels::{Kernel, TILE, blend};
+use crate::skinning::{
+    Method, dqs, lbs_normal_unnormalised, lbs_point, lbs_tangent_unnormalised, normalise_normals,
+    normalise_tangents,
+};
 
 /// Skins `out_positions.len()` vertices from `first_vertex` with static weights.
 pub struct StaticSkinJob<'a> {
@@ -80,43 +83,59 @@ impl StaticSkinJob<'_> {
     /// Validates, then skins the range. Never allocates.
     pub fn run(&mut self) -> Result<(), RuntimeError> {
         self.validate()?;
-        let (mats, dq) = (self.palette.matrices(), self.palette.dual_quats());
         let kernel = Kernel::detect();
-        for i in 0..self.out_positions.len() {
-            let v = self.first_vertex + i;
-            let (joints, weights) = self.skin.influences(v);
-            let infl = joints.iter().zip(weights).map(|(&j, &w)| (j as usize, w));
-            let p = self.rest_positions[v];
-            match self.method {
-                Method::Lbs => {
-                    // Only the requested outputs are computed.
-                    let mut m = glam::Mat4::ZERO;
-                    blend(kernel, &mut m, mats, infl);
-                    self.out_positions[i] = m.transform_point3(p);
-                    if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals)
-                    {
-                        o[i] = lbs_normal(&m, r[v]);
-                    }
-                    if let (Some(o), Some(r)) =
-                        (self.out_tangents.as_deref_mut(), self.rest_tangents)
-                    {
-                        o[i] = lbs_tangent(&m, r[v]);
-                    }
+        let count = self.out_positions.len();
+        // LBS normals and tangents are normalised a block at a time (`lbs_normal_unnormalised`).
+        for start in (0..count).step_by(TILE) {
+            let end = (start + TILE).min(count);
+            for i in start..end {
+                self.skin_one(kernel, i);
+            }
+            if self.method == Method::Lbs {
+                if let Some(o) = self.out_normals.as_deref_mut() {
+                    normalise_normals(&mut o[start..end]);
                 }
-                Method::Dqs => {
-                    let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
-                    let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
-                    let s = dqs(mats, dq, infl, p, n, t);
-                    self.out_positions[i] = s.position;
-                    if let Some(o) = self.out_normals.as_deref_mut() {
-                        o[i] = s.normal;
-                    }
-                    if let Some(o) = self.out_tangents.as_deref_mut() {
-                        o[i] = s.tangent;
-                    }
+                if let Some(o) = self.out_tangents.as_deref_mut() {
+                    normalise_tangents(&mut o[start..end]);
                 }
             }
         }
         Ok(())
+    }
+
+    /// Skins output `i`; LBS leaves its normal and tangent unnormalised.
+    #[inline]
+    fn skin_one(&mut self, kernel: Kernel, i: usize) {
+        let (mats, dq) = (self.palette.matrices(), self.palette.dual_quats());
+        let v = self.first_vertex + i;
+        let (joints, weights) = self.skin.influences(v);
+        let infl = joints.iter().zip(weights).map(|(&j, &w)| (j as usize, w));
+        let p = self.rest_positions[v];
+        match self.method {
+            Method::Lbs => {
+                // Only the requested outputs are computed.
+                let mut m = glam::Mat4::ZERO;
+                blend(kernel, &mut m, mats, infl);
+                self.out_positions[i] = lbs_point(&m, p);
+                if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals) {
+                    o[i] = lbs_normal_unnormalised(&m, r[v]);
+                }
+                if let (Some(o), Some(r)) = (self.out_tangents.as_deref_mut(), self.rest_tangents) {
+                    o[i] = lbs_tangent_unnormalised(&m, r[v]);
+                }
+            }
+            Method::Dqs => {
+                let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
+                let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
+                let s = dqs(mats, dq, infl, p, n, t);
+                self.out_positions[i] = s.position;
+                if let Some(o) = self.out_normals.as_deref_mut() {
+                    o[i] = s.normal;
+                }
+                if let Some(o) = self.out_tangents.as_deref_mut() {
+                    o[i] = s.tangent;
+                }
+            }
+        }
     }
 }

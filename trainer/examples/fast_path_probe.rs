@@ -6,7 +6,8 @@
 //! ```
 //!
 //! For every test frame it skins the capture's template with the exact path and with the fast
-//! path (default options, LBS), and prints the mean vertex deviation, how many vertex-frames
+//! path (LBS; the options of the measurements in docs/experiments/fast-path.md: 256 nodes, 8 base
+//! influences), and prints the mean vertex deviation, how many vertex-frames
 //! have a negative interpolated weight, and the worst vertices. `log` (the default) is the
 //! shipped fast path, which interpolates the nodes' log-weight changes,
 //! `w_v ∝ B_v ⊙ exp(Σ a_vi (ln w_n(θ) − ln w_n(bind)))`. `additive` re-skins every vertex with
@@ -27,7 +28,13 @@ fn main() {
     let n = t.positions.len();
     let j = model.joint_count();
     let mesh = BoundMesh::bind(&model, &t.positions).unwrap();
-    let fast = FastMesh::bind(&model, &t.positions, &t.triangles, &FastOptions::DEFAULT).unwrap();
+    // The options the lab notes were measured with (the defaults until 2026-12-03).
+    let options = FastOptions {
+        nodes: 256,
+        base_influences: 8,
+        ..FastOptions::DEFAULT
+    };
+    let fast = FastMesh::bind(&model, &t.positions, &t.triangles, &options).unwrap();
     let mut frame = FrameState::new(&model);
     let mut scratch = Scratch::new(&model);
     let mut nodes = FastFrame::new(&fast);

@@ -8,15 +8,18 @@ use glam::{Mat4, Vec3, Vec4};
 use skinfield_formats::MAX_JOINTS;
 
 use super::mesh::FastMesh;
-use super::topk::strongest_influences;
+use super::topk::{strongest_influences, strongest_sparse};
 use super::{Influence, MAX_INFLUENCES};
 
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, VertexOutputs, WeightsJob};
-use crate::kernels::{TILE, blend, softmax_tile, softmax8};
+use crate::kernels::{TILE, blend, softmax_tile};
 use crate::model::SkinNet;
-use crate::skinning::{Method, dqs, lbs_normal, lbs_tangent};
+use crate::skinning::{
+    DualQuat, Method, dqs, lbs_normal_unnormalised, lbs_point, lbs_tangent_unnormalised,
+    normalise_normals, normalise_tangents,
+};
 
 /// Node weights are floored here before their logarithm: a joint the node gives (almost) no
 /// weight in the bind pose and in the frame keeps a change of zero instead of the ratio of two
@@ -152,35 +155,38 @@ impl FastFrame {
         Ok(())
     }
 
-    /// The weights of vertex `v` on its base joints (base order; requires a base), the
-    /// interpolated log-weight changes applied to its bind-pose base and renormalised:
-    /// `w_vb ∝ B_vb · exp(Σ_i a_vi · L_{n_i, j_b})`. Returns the entries written.
-    pub(crate) fn base_weights(
-        &self,
-        mesh: &FastMesh,
-        v: usize,
-        out: &mut [Influence; MAX_INFLUENCES],
-    ) -> usize {
-        let base = mesh.base_of(v);
-        let mut t = [f32::NEG_INFINITY; MAX_INFLUENCES];
-        self.base_logits(mesh, v, &mut t);
-        // Normalised exponentials with the softmax's tail rule: below e^-72 of the strongest is
-        // exactly zero, so no subnormal float reaches the matrix blends.
-        softmax8(mesh.kernel(), &mut t);
-        for ((o, b), &w) in out.iter_mut().zip(base).zip(&t) {
-            *o = Influence {
-                index: b.index,
-                weight: w,
-            };
+    /// The weights of vertices `first .. first + len` (`len` ≤ [`TILE`]; requires a base) on
+    /// their base joints, the interpolated log-weight changes applied to the bind-pose base and
+    /// renormalised, `w_vb ∝ B_vb · exp(Σ_i a_vi · L_{n_i, j_b})`, into `tile`. One softmax over
+    /// the tile's columns (the runtime's `softmax_tile`, with its tail rule: below e^-72 of the
+    /// strongest is exactly zero, so no subnormal float reaches the matrix blends). Vertex by
+    /// vertex, each softmax waited on its own horizontal maximum and sum, a latency chain the
+    /// core could not overlap with the next vertex's work; across a tile the exponentials are
+    /// independent vectors. Each column is computed on its own, so a vertex's weights do not
+    /// depend on the tile it falls in.
+    pub(crate) fn base_tile(&self, mesh: &FastMesh, first: usize, len: usize, tile: &mut BaseTile) {
+        let rows = mesh.options().base_influences.min(MAX_INFLUENCES);
+        for k in 0..TILE {
+            let mut t = [f32::NEG_INFINITY; MAX_INFLUENCES];
+            if k < len {
+                self.base_logits(mesh, first + k, &mut t);
+            } else {
+                // A column past the range: one finite logit keeps its softmax finite.
+                t[0] = 0.0;
+            }
+            for (b, &x) in t.iter().enumerate().take(rows) {
+                tile.weights[b * TILE + k] = x;
+            }
         }
-        base.len()
+        softmax_tile(mesh.kernel(), &mut tile.weights, rows);
+        tile.first = first;
     }
 
     /// The logits of vertex `v`'s base weights before their softmax, `ln B_vb + Σ_i a_vi ·
     /// L_{n_i, j_b}`, into `t` in base order; slots past its base are left as they are (callers
     /// pass −∞: weight 0).
     #[inline]
-    pub(crate) fn base_logits(&self, mesh: &FastMesh, v: usize, t: &mut [f32; MAX_INFLUENCES]) {
+    fn base_logits(&self, mesh: &FastMesh, v: usize, t: &mut [f32; MAX_INFLUENCES]) {
         let j = self.joints;
         let (base, base_log) = (mesh.base_of(v), mesh.base_log_of(v));
         let interp = mesh.interp_of(v);
@@ -194,26 +200,55 @@ impl FastFrame {
         }
     }
 
-    /// The fast path's weights of vertex `v` into `out` (`J` floats, dense).
-    pub(crate) fn dense_weights(&self, mesh: &FastMesh, v: usize, out: &mut [f32]) {
+    /// The fast path's weights of vertex `v` without a base (the convex combination of its
+    /// nodes' weights) into `out` (`J` floats, dense).
+    pub(crate) fn convex_weights(&self, mesh: &FastMesh, v: usize, out: &mut [f32]) {
         let j = self.joints;
         out.fill(0.0);
-        if mesh.options().base_influences > 0 {
-            let mut entries = [Influence::default(); MAX_INFLUENCES];
-            let len = self.base_weights(mesh, v, &mut entries);
-            scatter(
-                entries[..len].iter().map(|e| (e.index as usize, e.weight)),
-                out,
-            );
-        } else {
-            for a in mesh.interp_of(v) {
-                let n = a.index as usize;
-                for (o, w) in out.iter_mut().zip(&self.node_weights[n * j..(n + 1) * j]) {
-                    *o += a.weight * w;
-                }
+        for a in mesh.interp_of(v) {
+            let n = a.index as usize;
+            for (o, w) in out.iter_mut().zip(&self.node_weights[n * j..(n + 1) * j]) {
+                *o += a.weight * w;
             }
         }
     }
+}
+
+/// A tile of vertices' softmaxed base weights ([`FastFrame::base_tile`]).
+pub(crate) struct BaseTile {
+    /// `[base slot][TILE]`: slot `b` of the tile's vertex `k` at `b · TILE + k`.
+    weights: [f32; MAX_INFLUENCES * TILE],
+    /// The tile's first vertex.
+    first: usize,
+}
+
+impl BaseTile {
+    /// An empty tile (fill it with [`FastFrame::base_tile`]).
+    pub(crate) fn new() -> Self {
+        Self {
+            weights: [0.0; MAX_INFLUENCES * TILE],
+            first: 0,
+        }
+    }
+
+    /// Vertex `v`'s `(joint, weight)` entries, in base order (`v` in the tile).
+    #[inline]
+    pub(crate) fn entries<'a>(
+        &'a self,
+        mesh: &'a FastMesh,
+        v: usize,
+    ) -> impl Iterator<Item = (usize, f32)> + Clone + 'a {
+        let k = v - self.first;
+        let base = mesh.base_of(v).iter().enumerate();
+        base.map(move |(b, e)| (e.index as usize, self.weights[b * TILE + k]))
+    }
+}
+
+/// `(start, len)` of the tiles of at most [`TILE`] outputs covering `0..count`.
+pub(crate) fn tiles(count: usize) -> impl Iterator<Item = (usize, usize)> {
+    (0..count)
+        .step_by(TILE)
+        .map(move |start| (start, TILE.min(count - start)))
 }
 
 /// Adds sparse `(joint, weight)` entries into dense weights `out`.
@@ -298,15 +333,20 @@ impl FastSkinJob<'_> {
     /// Validates, then skins the range. Never allocates.
     pub fn run(&mut self) -> Result<(), RuntimeError> {
         self.validate()?;
-        if self.method == Method::Lbs && self.mesh.options().base_influences > 0 {
-            self.run_lbs_tiled();
-            return Ok(());
+        if self.mesh.options().base_influences > 0 {
+            self.run_with_base();
+        } else {
+            self.run_convex();
         }
+        Ok(())
+    }
+
+    /// Without a base: each vertex takes the convex combination of its nodes' weights.
+    fn run_convex(&mut self) {
         let (mesh, nodes) = (self.mesh, self.nodes);
         let j = mesh.joint_count();
         let palette = self.frame.palette();
         let (mats, dq) = (palette.matrices(), palette.dual_quats());
-        let rest = mesh.rest_positions();
         let mut dense = [0.0f32; MAX_JOINTS];
         let dense = &mut dense[..j];
         let mut strongest = [Influence::default(); MAX_INFLUENCES];
@@ -317,9 +357,8 @@ impl FastSkinJob<'_> {
             let v = self.first_vertex + i;
             match self.method {
                 Method::Lbs => {
-                    // Without a base (with one, `run_lbs_tiled`), LBS is linear in the convex
-                    // node weights: the nodes' blended matrices give Σ_j w_vj M_j in
-                    // `neighbours` blends.
+                    // LBS is linear in the convex node weights: the nodes' blended matrices give
+                    // Σ_j w_vj M_j in `neighbours` blends.
                     let mut m = Mat4::ZERO;
                     let interp = mesh.interp_of(v).iter();
                     blend(
@@ -331,19 +370,10 @@ impl FastSkinJob<'_> {
                     self.write_lbs(i, v, &m);
                 }
                 Method::Dqs => {
-                    let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
-                    let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
-                    nodes.dense_weights(mesh, v, dense);
+                    nodes.convex_weights(mesh, v, dense);
                     strongest_influences(dense, strongest);
                     let infl = strongest.iter().map(|e| (e.index as usize, e.weight));
-                    let s = dqs(mats, dq, infl, rest[v], n, t);
-                    self.out_positions[i] = s.position;
-                    if let Some(o) = self.out_normals.as_deref_mut() {
-                        o[i] = s.normal;
-                    }
-                    if let Some(o) = self.out_tangents.as_deref_mut() {
-                        o[i] = s.tangent;
-                    }
+                    self.write_dqs(i, v, mats, dq, infl);
                 }
             }
             if let Some(o) = self.out_weights.as_deref_mut() {
@@ -351,69 +381,99 @@ impl FastSkinJob<'_> {
                 let o = &mut o[i * j..(i + 1) * j];
                 match self.method {
                     Method::Dqs => o.copy_from_slice(dense),
-                    Method::Lbs => nodes.dense_weights(mesh, v, o),
+                    Method::Lbs => nodes.convex_weights(mesh, v, o),
                 }
             }
         }
-        Ok(())
-    }
-
-    /// Output `i` of vertex `v` skinned with the blended matrix `m`: its position, and its
-    /// normal and tangent where the job asks for them.
-    #[inline]
-    fn write_lbs(&mut self, i: usize, v: usize, m: &Mat4) {
-        self.out_positions[i] = m.transform_point3(self.mesh.rest_positions()[v]);
-        if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals) {
-            o[i] = lbs_normal(m, r[v]);
-        }
-        if let (Some(o), Some(r)) = (self.out_tangents.as_deref_mut(), self.rest_tangents) {
-            o[i] = lbs_tangent(m, r[v]);
+        if self.method == Method::Lbs {
+            self.normalise_lbs(0..self.out_positions.len());
         }
     }
 
-    /// LBS with a base, [`TILE`] vertices at a time: the tile's base logits first, then one
-    /// softmax over the tile's columns, then the blends. Vertex by vertex, each softmax waited
-    /// on its own horizontal maximum and sum (a latency chain the core could not overlap with
-    /// the next vertex's); across a tile the exponentials are independent vectors. Each column
-    /// is computed on its own, so a vertex's result does not depend on the tile it falls in.
-    fn run_lbs_tiled(&mut self) {
+    /// With a base, [`TILE`] vertices at a time ([`FastFrame::base_tile`]): LBS blends the base
+    /// joints' matrices; DQS keeps the `influences` strongest base joints, so a vertex costs its
+    /// base, not the joint count.
+    fn run_with_base(&mut self) {
         let (mesh, nodes) = (self.mesh, self.nodes);
         let j = mesh.joint_count();
-        let mats = self.frame.palette().matrices();
+        let palette = self.frame.palette();
+        let (mats, dq) = (palette.matrices(), palette.dual_quats());
         let kernel = mesh.kernel();
-        let rows = mesh.options().base_influences.min(MAX_INFLUENCES);
-        let mut logits = [0.0f32; MAX_INFLUENCES * TILE];
-        let count = self.out_positions.len();
-        let mut start = 0;
-        while start < count {
-            let len = TILE.min(count - start);
-            for k in 0..TILE {
-                let mut t = [f32::NEG_INFINITY; MAX_INFLUENCES];
-                if k < len {
-                    nodes.base_logits(mesh, self.first_vertex + start + k, &mut t);
-                } else {
-                    // A column past the range: one finite logit keeps its softmax finite.
-                    t[0] = 0.0;
+        let mut strongest = [Influence::default(); MAX_INFLUENCES];
+        let strongest = &mut strongest[..self.influences];
+        let mut tile = BaseTile::new();
+        for (start, len) in tiles(self.out_positions.len()) {
+            nodes.base_tile(mesh, self.first_vertex + start, len, &mut tile);
+            for i in start..start + len {
+                let v = self.first_vertex + i;
+                let weights = tile.entries(mesh, v);
+                match self.method {
+                    Method::Lbs => {
+                        let mut m = Mat4::ZERO;
+                        blend(kernel, &mut m, mats, weights.clone());
+                        self.write_lbs(i, v, &m);
+                    }
+                    Method::Dqs => {
+                        strongest_sparse(weights.clone(), j, strongest);
+                        let infl = strongest.iter().map(|e| (e.index as usize, e.weight));
+                        self.write_dqs(i, v, mats, dq, infl);
+                    }
                 }
-                for (b, &x) in t.iter().enumerate().take(rows) {
-                    logits[b * TILE + k] = x;
-                }
-            }
-            softmax_tile(kernel, &mut logits, rows);
-            for k in 0..len {
-                let (i, v) = (start + k, self.first_vertex + start + k);
-                let base = mesh.base_of(v).iter().enumerate();
-                let weights = base.map(|(b, e)| (e.index as usize, logits[b * TILE + k]));
-                let mut m = Mat4::ZERO;
-                blend(kernel, &mut m, mats, weights.clone());
-                self.write_lbs(i, v, &m);
                 if let Some(o) = self.out_weights.as_deref_mut() {
                     let o = &mut o[i * j..(i + 1) * j];
                     o.fill(0.0);
                     scatter(weights, o);
                 }
             }
-            start += len;
+            if self.method == Method::Lbs {
+                self.normalise_lbs(start..start + len);
+            }
+        }
+    }
+
+    /// Output `i` of vertex `v` skinned by DQS over `infl`.
+    fn write_dqs(
+        &mut self,
+        i: usize,
+        v: usize,
+        mats: &[Mat4],
+        dq: &[DualQuat],
+        infl: impl Iterator<Item = (usize, f32)> + Clone,
+    ) {
+        let n = self.rest_normals.map_or(Vec3::Y, |r| r[v]);
+        let t = self.rest_tangents.map_or(Vec4::X, |r| r[v]);
+        let s = dqs(mats, dq, infl, self.mesh.rest_positions()[v], n, t);
+        self.out_positions[i] = s.position;
+        if let Some(o) = self.out_normals.as_deref_mut() {
+            o[i] = s.normal;
+        }
+        if let Some(o) = self.out_tangents.as_deref_mut() {
+            o[i] = s.tangent;
+        }
+    }
+
+    /// Output `i` of vertex `v` skinned with the blended matrix `m`: its position, and its
+    /// normal and tangent where the job asks for them, left unnormalised for
+    /// [`FastSkinJob::normalise_lbs`].
+    #[inline]
+    fn write_lbs(&mut self, i: usize, v: usize, m: &Mat4) {
+        self.out_positions[i] = lbs_point(m, self.mesh.rest_positions()[v]);
+        if let (Some(o), Some(r)) = (self.out_normals.as_deref_mut(), self.rest_normals) {
+            o[i] = lbs_normal_unnormalised(m, r[v]);
+        }
+        if let (Some(o), Some(r)) = (self.out_tangents.as_deref_mut(), self.rest_tangents) {
+            o[i] = lbs_tangent_unnormalised(m, r[v]);
+        }
+    }
+
+    /// Normalises the normals and tangents [`FastSkinJob::write_lbs`] wrote to outputs
+    /// `range`, a block at a time (`skinning::lbs_normal_unnormalised` says why).
+    fn normalise_lbs(&mut self, range: core::ops::Range<usize>) {
+        if let Some(o) = self.out_normals.as_deref_mut() {
+            normalise_normals(&mut o[range.clone()]);
+        }
+        if let Some(o) = self.out_tangents.as_deref_mut() {
+            normalise_tangents(&mut o[range]);
         }
     }
 }

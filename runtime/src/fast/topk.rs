@@ -5,7 +5,7 @@
 
 use skinfield_formats::MAX_JOINTS;
 
-use super::job::{FastFrame, check_range};
+use super::job::{BaseTile, FastFrame, check_range, tiles};
 use super::mesh::FastMesh;
 use super::{Influence, MAX_INFLUENCES};
 use crate::error::RuntimeError;
@@ -15,13 +15,63 @@ use crate::frame::FrameState;
 /// strongest first, negative values clamped to zero and renormalised to sum to one. Slots past
 /// `weights.len()` get joint 0 with weight 0; NaN never wins a slot.
 pub fn strongest_influences(weights: &[f32], out: &mut [Influence]) {
+    if out.is_empty() {
+        return;
+    }
+    let nan_last = |w: f32| if w.is_nan() { f32::NEG_INFINITY } else { w };
+    let len = select(weights.iter().map(|&w| nan_last(w)).enumerate(), out);
+    renormalise(out, len);
+}
+
+/// [`strongest_influences`] of the dense weights whose only non-zero entries are `entries`
+/// (`(joint, weight)`, distinct joints below `joints`, weights finite and non-negative, in any
+/// order), in a time that grows with `entries` and `out`, not with the joint count: the result is
+/// the same, joint indices of zero-weight slots included (the dense selection fills them with
+/// the lowest joints that hold no weight).
+pub(crate) fn strongest_sparse(
+    entries: impl Iterator<Item = (usize, f32)>,
+    joints: usize,
+    out: &mut [Influence],
+) {
     let k = out.len();
     if k == 0 {
         return;
     }
+    // The positive entries in joint order, so that ties resolve as in the dense selection.
+    let mut positive = [(0usize, 0.0f32); MAX_INFLUENCES];
+    let mut n = 0;
+    for (j, w) in entries.filter(|e| e.1 > 0.0).take(MAX_INFLUENCES) {
+        let mut at = n;
+        while at > 0 && positive[at - 1].0 > j {
+            positive[at] = positive[at - 1];
+            at -= 1;
+        }
+        positive[at] = (j, w);
+        n += 1;
+    }
+    let mut len = select(positive[..n].iter().copied(), out);
+    let mut j = 0;
+    while len < k && j < joints {
+        // Only reached when every positive entry already holds a slot.
+        if !positive[..n].iter().any(|p| p.0 == j) {
+            out[len] = Influence {
+                index: j as u32,
+                weight: 0.0,
+            };
+            len += 1;
+        }
+        j += 1;
+    }
+    renormalise(out, len);
+}
+
+/// Keeps the `out.len()` largest of `(joint, weight)` candidates given in joint order (a later
+/// candidate must be strictly larger to displace an earlier one), strongest first. Returns the
+/// slots filled.
+fn select(candidates: impl Iterator<Item = (usize, f32)>, out: &mut [Influence]) -> usize {
+    let k = out.len();
     let mut len = 0;
-    for (j, &w) in weights.iter().enumerate() {
-        let w = if w.is_nan() { f32::NEG_INFINITY } else { w };
+    for (j, w) in candidates {
         if len == k && w <= out[k - 1].weight {
             continue;
         }
@@ -38,6 +88,12 @@ pub fn strongest_influences(weights: &[f32], out: &mut [Influence]) {
         };
         len = (len + 1).min(k);
     }
+    len
+}
+
+/// Clears the slots past `len` (joint 0, weight 0) and renormalises the weights, negative ones
+/// clamped to zero, to sum to one (all zero: the first slot takes it all).
+fn renormalise(out: &mut [Influence], len: usize) {
     for o in &mut out[len..] {
         *o = Influence::default();
     }
@@ -204,55 +260,74 @@ impl TopKJob<'_> {
     /// Validates, then writes the range. Never allocates.
     pub fn run(&mut self) -> Result<(), RuntimeError> {
         self.validate()?;
+        let (mesh, nodes) = (self.mesh, self.nodes);
         let k = self.influences;
-        let j = self.mesh.joint_count();
-        let one = self.out_weights.one();
-        let mut dense = [0.0f32; MAX_JOINTS];
-        let dense = &mut dense[..j];
+        let j = mesh.joint_count();
         let mut top = [Influence::default(); MAX_INFLUENCES];
         let top = &mut top[..k];
-        let mut w = [0.0f32; MAX_INFLUENCES];
-        let mut q = [0u32; MAX_INFLUENCES];
-        for i in 0..self.out_indices.len() / k {
-            self.nodes
-                .dense_weights(self.mesh, self.first_vertex + i, dense);
-            strongest_influences(dense, top);
-            for (w, t) in w.iter_mut().zip(top.iter()) {
-                *w = t.weight;
-            }
-            quantise_largest_remainder(&w[..k], one, &mut q[..k]);
-            let range = i * k..(i + 1) * k;
-            match &mut self.out_indices {
-                TopKIndices::U8(o) => {
-                    for (o, t) in o[range.clone()].iter_mut().zip(top.iter()) {
-                        *o = t.index as u8;
-                    }
-                }
-                TopKIndices::U16(o) => {
-                    for (o, t) in o[range.clone()].iter_mut().zip(top.iter()) {
-                        *o = t.index as u16;
-                    }
+        let count = self.out_indices.len() / k;
+        if mesh.options().base_influences > 0 {
+            // A tile of base weights at a time; each vertex's selection costs its base.
+            let mut tile = BaseTile::new();
+            for (start, len) in tiles(count) {
+                nodes.base_tile(mesh, self.first_vertex + start, len, &mut tile);
+                for i in start..start + len {
+                    strongest_sparse(tile.entries(mesh, self.first_vertex + i), j, top);
+                    self.write(i, top);
                 }
             }
-            match &mut self.out_weights {
-                TopKWeights::Unorm8(o) => {
-                    for (o, &q) in o[range].iter_mut().zip(&q[..k]) {
-                        *o = q as u8;
-                    }
-                }
-                TopKWeights::Unorm16(o) => {
-                    for (o, &q) in o[range].iter_mut().zip(&q[..k]) {
-                        *o = q as u16;
-                    }
-                }
-                TopKWeights::F32(o) => {
-                    for (o, &q) in o[range].iter_mut().zip(&q[..k]) {
-                        *o = q as f32 * (1.0 / (1u32 << 24) as f32);
-                    }
-                }
+        } else {
+            let mut dense = [0.0f32; MAX_JOINTS];
+            let dense = &mut dense[..j];
+            for i in 0..count {
+                nodes.convex_weights(mesh, self.first_vertex + i, dense);
+                strongest_influences(dense, top);
+                self.write(i, top);
             }
         }
         Ok(())
+    }
+
+    /// Writes vertex `i` of the range: `top`'s joints and its weights quantised to the format.
+    fn write(&mut self, i: usize, top: &[Influence]) {
+        let k = top.len();
+        let one = self.out_weights.one();
+        let mut w = [0.0f32; MAX_INFLUENCES];
+        let mut q = [0u32; MAX_INFLUENCES];
+        for (w, t) in w.iter_mut().zip(top) {
+            *w = t.weight;
+        }
+        quantise_largest_remainder(&w[..k], one, &mut q[..k]);
+        let range = i * k..(i + 1) * k;
+        match &mut self.out_indices {
+            TopKIndices::U8(o) => {
+                for (o, t) in o[range.clone()].iter_mut().zip(top) {
+                    *o = t.index as u8;
+                }
+            }
+            TopKIndices::U16(o) => {
+                for (o, t) in o[range.clone()].iter_mut().zip(top) {
+                    *o = t.index as u16;
+                }
+            }
+        }
+        match &mut self.out_weights {
+            TopKWeights::Unorm8(o) => {
+                for (o, &q) in o[range].iter_mut().zip(&q[..k]) {
+                    *o = q as u8;
+                }
+            }
+            TopKWeights::Unorm16(o) => {
+                for (o, &q) in o[range].iter_mut().zip(&q[..k]) {
+                    *o = q as u16;
+                }
+            }
+            TopKWeights::F32(o) => {
+                for (o, &q) in o[range].iter_mut().zip(&q[..k]) {
+                    *o = q as f32 * (1.0 / (1u32 << 24) as f32);
+                }
+            }
+        }
     }
 }
 
@@ -293,6 +368,46 @@ mod tests {
         let mut out = [Influence::default(); 1];
         strongest_influences(&[f32::NAN, 0.2], &mut out);
         assert_eq!(out[0].index, 1);
+    }
+
+    /// The sparse selection (a vertex's base entries) gives what the dense one gives on the
+    /// scattered weights, joints of zero-weight slots included: ties, exact zeros among the
+    /// entries, fewer entries than slots, entries in any order.
+    #[test]
+    fn sparse_selection_equals_the_dense_one() {
+        let mut state = 777u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            state >> 8
+        };
+        for case in 0..2000 {
+            let joints = 1 + (next() % 70) as usize;
+            let count = (next() as usize % MAX_INFLUENCES.min(joints)) + 1;
+            let mut entries: Vec<(usize, f32)> = Vec::new();
+            while entries.len() < count {
+                let j = next() as usize % joints;
+                if entries.iter().all(|e| e.0 != j) {
+                    // Coarse values make ties; every fourth entry is an exact zero.
+                    let w = if next() % 4 == 0 {
+                        0.0
+                    } else {
+                        (1 + next() % 4) as f32 / 8.0
+                    };
+                    entries.push((j, w));
+                }
+            }
+            let mut dense = vec![0.0f32; joints];
+            for &(j, w) in &entries {
+                dense[j] = w;
+            }
+            for k in 1..=MAX_INFLUENCES {
+                let mut want = vec![Influence::default(); k];
+                strongest_influences(&dense, &mut want);
+                let mut got = vec![Influence::default(); k];
+                strongest_sparse(entries.iter().copied(), joints, &mut got);
+                assert_eq!(got, want, "case {case}, k = {k}, {entries:?}");
+            }
+        }
     }
 
     #[test]

@@ -177,38 +177,6 @@ pub(super) unsafe fn softmax_tile(buf: &mut [f32], rows: usize) {
     }
 }
 
-/// Every lane of `v` set to the maximum (`max = true`) or the sum of its 8 lanes.
-#[inline]
-#[target_feature(enable = "avx2,fma")]
-fn horizontal(v: __m256, max: bool) -> __m256 {
-    let op = |a, b| {
-        if max {
-            _mm256_max_ps(a, b)
-        } else {
-            _mm256_add_ps(a, b)
-        }
-    };
-    let v = op(v, _mm256_permute2f128_ps::<1>(v, v));
-    let v = op(v, _mm256_shuffle_ps::<0b0100_1110>(v, v));
-    op(v, _mm256_shuffle_ps::<0b1011_0001>(v, v))
-}
-
-/// Softmax of 8 values in place (`−∞` for an unused slot), one vector.
-///
-/// # Safety
-/// The CPU must support AVX2 and FMA.
-#[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn softmax8(x: &mut [f32; 8]) {
-    // SAFETY: `x` is 8 floats; unaligned load and store.
-    let v = unsafe { _mm256_loadu_ps(x.as_ptr()) };
-    let z = _mm256_sub_ps(v, horizontal(v, true));
-    let keep = _mm256_cmp_ps::<_CMP_GE_OQ>(z, _mm256_set1_ps(-EXP_TAIL));
-    let e = _mm256_and_ps(keep, exp_ps(z));
-    let w = _mm256_div_ps(e, horizontal(e, false));
-    // SAFETY: as above.
-    unsafe { _mm256_storeu_ps(x.as_mut_ptr(), w) };
-}
-
 /// Softplus in place over `x` and its slope `sigmoid(β·x)` into `slope` (the trainer's forward
 /// pass keeps the slope for its backward pass), 8 lanes at a time; the tail goes through the
 /// scalar path.

@@ -171,21 +171,6 @@ pub(crate) fn softmax_tile(kernel: Kernel, buf: &mut [f32], rows: usize) {
     }
 }
 
-/// Softmax of 8 values in place (`−∞` marks an unused slot, which gets weight 0; at least one
-/// slot must be finite), with the softmax tail rule (below `e^-72` of the largest is exactly
-/// zero): the fast path's per-vertex weights over its base joints.
-pub(crate) fn softmax8(kernel: Kernel, x: &mut [f32; 8]) {
-    match kernel {
-        #[cfg(target_arch = "x86_64")]
-        Kernel::Avx512 | Kernel::Avx2 if !cfg!(feature = "scalar") && has_avx2() => {
-            // SAFETY: `has_avx2` confirmed avx2 + fma on this CPU (AVX-512 CPUs have both, but
-            // it is checked, not assumed).
-            unsafe { avx2::softmax8(x) }
-        }
-        _ => scalar::softmax8(x),
-    }
-}
-
 /// Softplus with sharpness `beta` in place over `x`, and its slope `sigmoid(β·x)` written to
 /// `slope`: the activation of a training step's forward pass together with what its backward
 /// pass needs (`∂softplus/∂x`), with the same polynomials the runtime's layers use.

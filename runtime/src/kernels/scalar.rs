@@ -43,19 +43,6 @@ pub(super) fn layer(a: LayerArgs<'_>) {
     }
 }
 
-pub(super) fn softmax8(x: &mut [f32; 8]) {
-    let m = x.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-    let mut sum = 0.0;
-    for v in x.iter_mut() {
-        let z = *v - m;
-        *v = if z >= -EXP_TAIL { libm::expf(z) } else { 0.0 };
-        sum += *v;
-    }
-    for v in x.iter_mut() {
-        *v /= sum;
-    }
-}
-
 pub(super) fn softmax_tile(buf: &mut [f32], rows: usize) {
     for v in 0..TILE {
         let mut m = f32::NEG_INFINITY;
