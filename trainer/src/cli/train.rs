@@ -9,7 +9,7 @@ use clap::Parser;
 use skinfield_formats::StaticSkin;
 use skinfield_formats::capture::{Capture, load_capture};
 use skinfield_trainer::eval::static_weights::write_static_weights;
-use skinfield_trainer::train::data::{DataOptions, initial_weights, train_data};
+use skinfield_trainer::train::data::{DataOptions, initial_weights, static_train_data, train_data};
 use skinfield_trainer::train::plot::plot_log;
 use skinfield_trainer::train::stages::{ColourSource, load_images};
 use skinfield_trainer::train::{TrainConfig, Trainer};
@@ -242,7 +242,9 @@ fn report_warm_start(trainer: &Trainer) {
 }
 
 /// Trains the static baseline at full template resolution (it has one weight set per vertex, so
-/// it cannot be evaluated at another resolution) and writes the static-weights file.
+/// it cannot be evaluated at another resolution; a template split into copies of its positions
+/// trains welded, one weight set per position: `train::data::static_train_data`) and writes the
+/// static-weights file.
 pub fn train_static(
     capture: &Capture,
     initial: &StaticSkin,
@@ -254,11 +256,15 @@ pub fn train_static(
 ) -> anyhow::Result<f64> {
     // The logits start at the initial weights: regressing them first would be a no-op.
     config.warm_start_iterations = 0;
-    let options = DataOptions {
-        train_vertices: 0,
-        ..DataOptions::default()
-    };
-    let data = train_data(capture, initial, &options)?;
+    let (data, welded) = static_train_data(capture, initial)?;
+    if let (Some(w), true) = (&welded, progress) {
+        println!(
+            "static baseline: the template's {} vertices lie at {} positions; one weight set per \
+             position",
+            capture.template.vertex_count(),
+            w.template.vertex_count()
+        );
+    }
     let skeleton = data.skeleton.clone();
     let joints = skeleton.len();
     let mut trainer = Trainer::new(data, config, true)?;
@@ -271,9 +277,13 @@ pub fn train_static(
     let seconds = start.elapsed().as_secs_f64();
     plot_logs(work, "Static baseline")?;
     check_validation(&trainer)?;
-    let dense = trainer
+    let mut dense = trainer
         .static_weights()?
         .context("the trainer holds no static weights")?;
+    if let Some(w) = &welded {
+        // Every copy of a position takes its welded vertex's weights.
+        dense = w.expand(&dense, joints);
+    }
     let skin = StaticSkin::from_dense(&dense, joints)?;
     write_static_weights(out, &skeleton, &skin)?;
     Ok(seconds)

@@ -140,7 +140,12 @@ pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u
     if direct.1.len() as f64 <= target as f64 * SEAM_SLACK {
         return direct;
     }
-    let Some((welded, representative)) = weld_template(template) else {
+    let Some(WeldedTemplate {
+        template: welded,
+        representative,
+        ..
+    }) = weld_template(template)
+    else {
         return direct;
     };
     let (simplified, source) = if welded.vertex_count() > target {
@@ -160,13 +165,50 @@ pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u
 /// first.
 pub const SEAM_SLACK: f64 = 1.25;
 
+/// A template welded by exact position ([`weld_template`]).
+#[derive(Clone, Debug)]
+pub struct WeldedTemplate {
+    /// The welded template.
+    pub template: Template,
+    /// Per welded vertex, the original vertex it copies (the first of its copies).
+    pub representative: Vec<u32>,
+    /// Per original vertex, the welded vertex it became.
+    pub of_input: Vec<u32>,
+}
+
+impl WeldedTemplate {
+    /// Per-vertex rows of the original template (`joints` each) reduced to the welded vertices:
+    /// each takes its representative's row.
+    #[must_use]
+    pub fn restrict(&self, rows: &[f32], joints: usize) -> Vec<f32> {
+        gather_rows(rows, joints, &self.representative)
+    }
+
+    /// Per-welded-vertex rows (`joints` each) copied to every original vertex.
+    #[must_use]
+    pub fn expand(&self, rows: &[f32], joints: usize) -> Vec<f32> {
+        gather_rows(rows, joints, &self.of_input)
+    }
+}
+
+/// Rows `which` of `rows` (`width` floats each), in that order.
+fn gather_rows(rows: &[f32], width: usize, which: &[u32]) -> Vec<f32> {
+    which
+        .iter()
+        .flat_map(|&r| {
+            rows[r as usize * width..(r as usize + 1) * width]
+                .iter()
+                .copied()
+        })
+        .collect()
+}
+
 /// `template` with the vertices at equal positions merged into the first of them: its
 /// attributes are that vertex's, normals are recomputed from the welded triangles (a split
 /// mesh's copies carry one normal per face), and triangles that collapse or repeat are dropped.
-/// Returns the welded template and, per welded vertex, the original vertex it copies; `None`
-/// when the result is not a valid template.
+/// `None` when the result is not a valid template.
 #[must_use]
-pub fn weld_template(template: &Template) -> Option<(Template, Vec<u32>)> {
+pub fn weld_template(template: &Template) -> Option<WeldedTemplate> {
     let welded = crate::heat::weld::weld(&template.positions, &template.triangles, 0.0);
     let representative = welded.representative;
     let positions: Vec<glam::Vec3> = representative
@@ -185,7 +227,53 @@ pub fn weld_template(template: &Template) -> Option<(Template, Vec<u32>)> {
         welded.triangles,
         Some(normals),
     );
-    Some((t.ok()?, representative))
+    Some(WeldedTemplate {
+        template: t.ok()?,
+        representative,
+        of_input: welded.of_input,
+    })
+}
+
+/// The template the static baseline trains on when `template` is split into copies of its
+/// positions (at its faces or UV charts; welding removes more than `1 − 1 / SEAM_SLACK` of its
+/// vertices): its weld, so that copies share one weight set. `None` keeps the template.
+///
+/// Static weights are free per vertex and the Laplacian couples only the vertices of one
+/// triangle, so on a mesh split at every face the copies of a position drift apart and the
+/// surface tears wherever that explains a silhouette (the Witch's static baseline ended worse
+/// than bone heat). SkinNet does not need this: it is a function of position, so copies get the
+/// same weights. Welding is not used for meshes with a few coincident vertices only (the
+/// built-in skirt's waistband lies on the body), for the reason given at [`simplify_template`].
+#[must_use]
+pub fn static_training_template(template: &Template) -> Option<WeldedTemplate> {
+    let n = template.vertex_count() as f64;
+    weld_template(template).filter(|w| w.template.vertex_count() as f64 * SEAM_SLACK < n)
+}
+
+/// The static baseline's training data: [`train_data`] at full resolution, on the weld of a
+/// template split into copies of its positions ([`static_training_template`]; the initial weights
+/// of each position are its first copy's), with that weld, whose [`WeldedTemplate::expand`]
+/// gives the trained weights back to every copy.
+pub fn static_train_data(
+    capture: &Capture,
+    initial: &StaticSkin,
+) -> Result<(TrainData, Option<WeldedTemplate>), DataError> {
+    let options = DataOptions {
+        train_vertices: 0,
+        ..DataOptions::default()
+    };
+    let Some(welded) = static_training_template(&capture.template) else {
+        return Ok((train_data(capture, initial, &options)?, None));
+    };
+    let j = initial.joint_count();
+    let first_copies = welded.restrict(&initial.to_dense(), j);
+    let initial = StaticSkin::from_dense(&first_copies, j)
+        .map_err(|e| DataError::Inconsistent(format!("initial weights of the weld: {e}")))?;
+    let capture = Capture {
+        template: welded.template.clone(),
+        ..capture.clone()
+    };
+    Ok((train_data(&capture, &initial, &options)?, Some(welded)))
 }
 
 /// Builds the stage-1 training data from `capture`'s training frames.
@@ -278,6 +366,34 @@ pub fn train_data(
 mod tests {
     use super::*;
 
+    /// `t` split at every face (each triangle its own three vertices, as exporters write
+    /// flat-shaded or per-material meshes), and the vertex of `t` each split vertex copies.
+    fn split_at_every_face(t: &Template) -> (Template, Vec<u32>) {
+        let corners: Vec<u32> = t.triangles.iter().flatten().copied().collect();
+        let pick = |i: &u32| *i as usize;
+        let split = Template {
+            positions: corners.iter().map(|i| t.positions[pick(i)]).collect(),
+            normals: corners.iter().map(|i| t.normals[pick(i)]).collect(),
+            triangles: (0..t.triangles.len() as u32)
+                .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+                .collect(),
+            uvs: t
+                .uvs
+                .as_ref()
+                .map(|a| corners.iter().map(|i| a[pick(i)]).collect()),
+            colors: t
+                .colors
+                .as_ref()
+                .map(|a| corners.iter().map(|i| a[pick(i)]).collect()),
+            part_labels: t
+                .part_labels
+                .as_ref()
+                .map(|a| corners.iter().map(|i| a[pick(i)]).collect()),
+        };
+        split.validate().unwrap();
+        (split, corners)
+    }
+
     /// `simplified`'s vertex `k` is `original`'s vertex `source[k]`: same position, same part.
     fn assert_subset_of(simplified: &Template, source: &[u32], original: &Template) {
         assert_eq!(source.len(), simplified.vertex_count());
@@ -316,28 +432,7 @@ mod tests {
     fn a_mesh_split_at_every_face_is_welded_then_simplified() {
         let cfg = crate::synth::SynthConfig::tiny();
         let t = crate::synth::build_character(&cfg).unwrap().template;
-        let corners: Vec<u32> = t.triangles.iter().flatten().copied().collect();
-        let pick = |i: &u32| *i as usize;
-        let split = Template {
-            positions: corners.iter().map(|i| t.positions[pick(i)]).collect(),
-            normals: corners.iter().map(|i| t.normals[pick(i)]).collect(),
-            triangles: (0..t.triangles.len() as u32)
-                .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
-                .collect(),
-            uvs: t
-                .uvs
-                .as_ref()
-                .map(|a| corners.iter().map(|i| a[pick(i)]).collect()),
-            colors: t
-                .colors
-                .as_ref()
-                .map(|a| corners.iter().map(|i| a[pick(i)]).collect()),
-            part_labels: t
-                .part_labels
-                .as_ref()
-                .map(|a| corners.iter().map(|i| a[pick(i)]).collect()),
-        };
-        split.validate().unwrap();
+        let (split, _) = split_at_every_face(&t);
         let target = t.vertex_count() / 3;
         let stuck = simplify(&split, Target::Vertices(target)).unwrap();
         assert!(
@@ -354,14 +449,29 @@ mod tests {
         );
         assert_subset_of(&r, &source, &split);
         // Welded, the split mesh is the original one again: as many vertices and triangles.
-        let (welded, representative) = weld_template(&split).unwrap();
-        assert_eq!(welded.vertex_count(), t.vertex_count());
-        assert_eq!(welded.triangles.len(), t.triangles.len());
+        let welded = weld_template(&split).unwrap();
+        assert_eq!(welded.template.vertex_count(), t.vertex_count());
+        assert_eq!(welded.template.triangles.len(), t.triangles.len());
         assert!(
-            representative
+            welded
+                .representative
                 .iter()
                 .all(|&i| (i as usize) < split.vertex_count())
         );
+        // Every copy maps to the welded vertex at its position, which copies one of them.
+        for (o, &w) in welded.of_input.iter().enumerate() {
+            let w = w as usize;
+            assert_eq!(welded.template.positions[w], split.positions[o]);
+            assert_eq!(
+                welded.of_input[welded.representative[w] as usize] as usize,
+                w
+            );
+        }
+        // The static baseline trains on the weld of a split mesh, and on the mesh itself
+        // otherwise.
+        let for_static = static_training_template(&split).unwrap();
+        assert_eq!(for_static.template.vertex_count(), t.vertex_count());
+        assert!(static_training_template(&t).is_none());
     }
 
     #[test]
@@ -398,5 +508,54 @@ mod tests {
                 .queries
                 .is_none()
         );
+    }
+
+    /// The static baseline of a capture whose template is split at every face trains on the
+    /// weld (the unsplit vertex count, each position starting from its first copy's weights) and
+    /// gives every copy of a position the same weights back; an unsplit template trains as it is.
+    #[test]
+    fn the_static_baseline_of_a_split_template_trains_one_weight_set_per_position() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = skinfield_formats::capture::load_capture(dir.path()).unwrap();
+        let initial = initial_weights(&capture).unwrap();
+        let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
+        let (same, none) = static_train_data(&capture, &initial).unwrap();
+        assert!(none.is_none());
+        assert_eq!(same.template.vertex_count(), n);
+
+        let (split, corners) = split_at_every_face(&capture.template);
+        let dense = initial.to_dense();
+        let split_initial = StaticSkin::from_dense(&gather_rows(&dense, j, &corners), j).unwrap();
+        let split_capture = Capture {
+            template: split.clone(),
+            ..capture.clone()
+        };
+        let (data, welded) = static_train_data(&split_capture, &split_initial).unwrap();
+        let welded = welded.unwrap();
+        assert_eq!(data.template.vertex_count(), n);
+        for (w, &first) in welded.representative.iter().enumerate() {
+            let original = corners[first as usize] as usize;
+            assert_eq!(
+                data.template.positions[w],
+                capture.template.positions[original]
+            );
+            // (The sparse skin renormalises: equal up to rounding.)
+            let rows = data.init_weights[w * j..(w + 1) * j]
+                .iter()
+                .zip(&dense[original * j..(original + 1) * j]);
+            for (got, want) in rows {
+                assert!((got - want).abs() < 1e-6, "vertex {w}: {got} vs {want}");
+            }
+        }
+        // Distinct rows per welded vertex: every copy gets its own position's row.
+        let trained: Vec<f32> = (0..n * j).map(|i| i as f32).collect();
+        let back = welded.expand(&trained, j);
+        assert_eq!(back.len(), split.vertex_count() * j);
+        for (copy, row) in back.chunks_exact(j).enumerate() {
+            let w = row[0] as usize / j;
+            assert_eq!(row, &trained[w * j..(w + 1) * j]);
+            assert_eq!(data.template.positions[w], split.positions[copy]);
+        }
     }
 }
