@@ -366,6 +366,15 @@ pub fn train_data(
 mod tests {
     use super::*;
 
+    /// A tiny synthetic capture (its folder kept alive by the returned guard) and its bone heat.
+    fn tiny_capture() -> (tempfile::TempDir, Capture, StaticSkin) {
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = skinfield_formats::capture::load_capture(dir.path()).unwrap();
+        let initial = initial_weights(&capture).unwrap();
+        (dir, capture, initial)
+    }
+
     /// `t` split at every face (each triangle its own three vertices, as exporters write
     /// flat-shaded or per-material meshes), and the vertex of `t` each split vertex copies.
     fn split_at_every_face(t: &Template) -> (Template, Vec<u32>) {
@@ -476,10 +485,7 @@ mod tests {
 
     #[test]
     fn a_simplified_training_template_gets_query_cells_over_the_full_template() {
-        let dir = tempfile::tempdir().unwrap();
-        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
-        let capture = skinfield_formats::capture::load_capture(dir.path()).unwrap();
-        let initial = initial_weights(&capture).unwrap();
+        let (_dir, capture, initial) = tiny_capture();
         let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
         let options = |train_vertices| DataOptions {
             train_vertices,
@@ -515,10 +521,7 @@ mod tests {
     /// gives every copy of a position the same weights back; an unsplit template trains as it is.
     #[test]
     fn the_static_baseline_of_a_split_template_trains_one_weight_set_per_position() {
-        let dir = tempfile::tempdir().unwrap();
-        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
-        let capture = skinfield_formats::capture::load_capture(dir.path()).unwrap();
-        let initial = initial_weights(&capture).unwrap();
+        let (_dir, capture, initial) = tiny_capture();
         let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
         let (same, none) = static_train_data(&capture, &initial).unwrap();
         assert!(none.is_none());
