@@ -449,6 +449,91 @@ fn sub_ranges_give_the_same_result_as_one_run() {
     assert_eq!(pw, aw[33 * 4..83 * 4]);
 }
 
+/// LBS jobs normalise their normals and tangents a tile at a time after the blends: on every
+/// path (fast with and without a base, tangents asked for without normals, static skinning)
+/// they come out of unit length, and the static ones match the inverse transpose of the blended
+/// matrix.
+#[test]
+fn lbs_normals_and_tangents_are_normalised_on_every_path() {
+    let f = fixture(6, 4);
+    let (n, j) = (f.positions.len(), f.model.joint_count());
+    let unit = |v: Vec3| (v.length() - 1.0).abs() < 1e-5;
+    let mut dense = Vec::new();
+    for base in [FastOptions::DEFAULT.base_influences, 0] {
+        let options = FastOptions {
+            nodes: 20,
+            base_influences: base,
+            ..FastOptions::DEFAULT
+        };
+        let (mesh, nodes) = bind(&f, &options);
+        let all = run_fast(&f, &mesh, &nodes, Method::Lbs, 4, 0..n);
+        assert!(all.n.iter().all(|&v| unit(v)), "base {base}");
+        assert!(all.t.iter().all(|v| unit(v.truncate())), "base {base}");
+        let (mut p, mut t) = (vec![Vec3::ZERO; n], vec![Vec4::NAN; n]);
+        FastSkinJob {
+            mesh: &mesh,
+            frame: &f.frame,
+            nodes: &nodes,
+            method: Method::Lbs,
+            influences: 4,
+            first_vertex: 0,
+            rest_normals: None,
+            rest_tangents: Some(&f.tangents),
+            out_positions: &mut p,
+            out_normals: None,
+            out_tangents: Some(&mut t),
+            out_weights: None,
+        }
+        .run()
+        .unwrap();
+        assert_eq!(t, all.t, "tangents without normals, base {base}");
+        dense = all.w;
+    }
+    // Static LBS with the convex run's dense weights, against M⁻ᵀ n and M t.
+    let (mut offsets, mut joints, mut weights) = (vec![0u32], Vec::new(), Vec::new());
+    for row in dense.chunks_exact(j) {
+        for (joint, &w) in row.iter().enumerate() {
+            joints.push(joint as u32);
+            weights.push(w);
+        }
+        offsets.push(joints.len() as u32);
+    }
+    let skin = StaticSkin::new(offsets, joints, weights, j).unwrap();
+    let (mut p, mut nn, mut t) = (vec![Vec3::ZERO; n], vec![Vec3::NAN; n], vec![Vec4::NAN; n]);
+    StaticSkinJob {
+        skin: &skin,
+        palette: f.frame.palette(),
+        method: Method::Lbs,
+        first_vertex: 0,
+        rest_positions: &f.positions,
+        rest_normals: Some(&f.normals),
+        rest_tangents: Some(&f.tangents),
+        out_positions: &mut p,
+        out_normals: Some(&mut nn),
+        out_tangents: Some(&mut t),
+    }
+    .run()
+    .unwrap();
+    let mats = f.frame.palette().matrices();
+    for v in 0..n {
+        let row = &dense[v * j..(v + 1) * j];
+        let m = row
+            .iter()
+            .zip(mats)
+            .fold(glam::Mat4::ZERO, |acc, (&w, m)| acc + *m * w);
+        let m3 = glam::Mat3::from_mat4(m);
+        let want_n = (m3.inverse().transpose() * f.normals[v]).normalize();
+        let want_t = (m3 * f.tangents[v].truncate()).normalize();
+        assert!(
+            (nn[v] - want_n).length() < 1e-4,
+            "normal {v}: {} vs {want_n}",
+            nn[v]
+        );
+        assert!((t[v].truncate() - want_t).length() < 1e-4, "tangent {v}");
+        assert_eq!(t[v].w, f.tangents[v].w);
+    }
+}
+
 /// Two parallel sheets 1 mm apart (a skirt over a leg, an arm against the torso): along the
 /// mesh every vertex's nodes lie on its own sheet; in straight-line distance they leak.
 #[test]

@@ -1,5 +1,5 @@
-//! The fast path per frame: [`FastFrame`] (SkinNet at the nodes, residual weights and matrices,
-//! once per frame) and [`FastSkinJob`] (skinning any vertex range), with no heap allocation.
+//! The fast path per frame: [`FastFrame`] (SkinNet at the nodes and their log-weight changes, or
+//! blended node matrices without a base, once per frame) and [`FastSkinJob`] (skinning any vertex range), with no heap allocation.
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -353,40 +353,42 @@ impl FastSkinJob<'_> {
         let strongest = &mut strongest[..self.influences];
         let kernel = mesh.kernel();
         let node_mats = nodes.node_matrices();
-        for i in 0..self.out_positions.len() {
-            let v = self.first_vertex + i;
-            match self.method {
-                Method::Lbs => {
-                    // LBS is linear in the convex node weights: the nodes' blended matrices give
-                    // Σ_j w_vj M_j in `neighbours` blends.
-                    let mut m = Mat4::ZERO;
-                    let interp = mesh.interp_of(v).iter();
-                    blend(
-                        kernel,
-                        &mut m,
-                        node_mats,
-                        interp.map(|a| (a.index as usize, a.weight)),
-                    );
-                    self.write_lbs(i, v, &m);
-                }
-                Method::Dqs => {
-                    nodes.convex_weights(mesh, v, dense);
-                    strongest_influences(dense, strongest);
-                    let infl = strongest.iter().map(|e| (e.index as usize, e.weight));
-                    self.write_dqs(i, v, mats, dq, infl);
-                }
-            }
-            if let Some(o) = self.out_weights.as_deref_mut() {
-                // What the branch above formed is written, not formed a second time.
-                let o = &mut o[i * j..(i + 1) * j];
+        for (start, len) in tiles(self.out_positions.len()) {
+            for i in start..start + len {
+                let v = self.first_vertex + i;
                 match self.method {
-                    Method::Dqs => o.copy_from_slice(dense),
-                    Method::Lbs => nodes.convex_weights(mesh, v, o),
+                    Method::Lbs => {
+                        // LBS is linear in the convex node weights: the nodes' blended
+                        // matrices give Σ_j w_vj M_j in `neighbours` blends.
+                        let mut m = Mat4::ZERO;
+                        let interp = mesh.interp_of(v).iter();
+                        blend(
+                            kernel,
+                            &mut m,
+                            node_mats,
+                            interp.map(|a| (a.index as usize, a.weight)),
+                        );
+                        self.write_lbs(i, v, &m);
+                    }
+                    Method::Dqs => {
+                        nodes.convex_weights(mesh, v, dense);
+                        strongest_influences(dense, strongest);
+                        let infl = strongest.iter().map(|e| (e.index as usize, e.weight));
+                        self.write_dqs(i, v, mats, dq, infl);
+                    }
+                }
+                if let Some(o) = self.out_weights.as_deref_mut() {
+                    // What the branch above formed is written, not formed a second time.
+                    let o = &mut o[i * j..(i + 1) * j];
+                    match self.method {
+                        Method::Dqs => o.copy_from_slice(dense),
+                        Method::Lbs => nodes.convex_weights(mesh, v, o),
+                    }
                 }
             }
-        }
-        if self.method == Method::Lbs {
-            self.normalise_lbs(0..self.out_positions.len());
+            if self.method == Method::Lbs {
+                self.normalise_lbs(start..start + len);
+            }
         }
     }
 
