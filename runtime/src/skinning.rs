@@ -111,7 +111,7 @@ pub(crate) fn lbs_normal(m: &Mat4, n: Vec3) -> Vec3 {
 }
 
 /// [`lbs_normal`] before its normalisation. Jobs that skin many vertices write this and call
-/// [`normalise_normals`] on a block afterwards: a normalisation is a square root and a division
+/// [`normalise_block`] on a block afterwards: a normalisation is a square root and a division
 /// that each wait on the last, and done vertex by vertex that chain stalled the next vertex's
 /// blend (a fifth of the fast path's per-vertex samples sat on it); over a block the chains are
 /// independent. The result is the same to the bit.
@@ -123,8 +123,7 @@ pub(crate) fn lbs_normal_unnormalised(m: &Mat4, n: Vec3) -> Vec3 {
 /// A tangent under a blended skinning matrix, handedness `w` kept.
 #[inline]
 pub(crate) fn lbs_tangent(m: &Mat4, t: Vec4) -> Vec4 {
-    let u = lbs_tangent_unnormalised(m, t);
-    unit(u.truncate()).extend(u.w)
+    unit_tangent(lbs_tangent_unnormalised(m, t))
 }
 
 /// [`lbs_tangent`] before its normalisation (see [`lbs_normal_unnormalised`]).
@@ -139,17 +138,29 @@ fn unit(v: Vec3) -> Vec3 {
     Vec3::from(Vec3A::from(v).normalize_or_zero())
 }
 
-/// Normalises a block of [`lbs_normal_unnormalised`] outputs in place.
-pub(crate) fn normalise_normals(normals: &mut [Vec3]) {
-    for n in normals {
-        *n = unit(*n);
-    }
+/// A tangent's direction scaled to unit length (or zero), its handedness `w` kept.
+#[inline]
+fn unit_tangent(t: Vec4) -> Vec4 {
+    unit(t.truncate()).extend(t.w)
 }
 
-/// Normalises a block of [`lbs_tangent_unnormalised`] outputs in place (`w` kept).
-pub(crate) fn normalise_tangents(tangents: &mut [Vec4]) {
-    for t in tangents {
-        *t = unit(t.truncate()).extend(t.w);
+/// Normalises outputs `range` of the [`lbs_normal_unnormalised`] normals and
+/// [`lbs_tangent_unnormalised`] tangents an LBS job wrote (either may be absent), a block at a
+/// time.
+pub(crate) fn normalise_block(
+    normals: Option<&mut [Vec3]>,
+    tangents: Option<&mut [Vec4]>,
+    range: core::ops::Range<usize>,
+) {
+    if let Some(o) = normals {
+        for n in &mut o[range.clone()] {
+            *n = unit(*n);
+        }
+    }
+    if let Some(o) = tangents {
+        for t in &mut o[range] {
+            *t = unit_tangent(*t);
+        }
     }
 }
 

@@ -7,10 +7,9 @@ use skinfield_formats::StaticSkin;
 use crate::error::RuntimeError;
 use crate::frame::Palette;
 use crate::job::VertexOutputs;
-use crate::kernels::{Kernel, TILE, blend};
+use crate::kernels::{Kernel, blend, tiles};
 use crate::skinning::{
-    Method, dqs, lbs_normal_unnormalised, lbs_point, lbs_tangent_unnormalised, normalise_normals,
-    normalise_tangents,
+    Method, dqs, lbs_normal_unnormalised, lbs_point, lbs_tangent_unnormalised, normalise_block,
 };
 
 /// Skins `out_positions.len()` vertices from `first_vertex` with static weights.
@@ -84,20 +83,17 @@ impl StaticSkinJob<'_> {
     pub fn run(&mut self) -> Result<(), RuntimeError> {
         self.validate()?;
         let kernel = Kernel::detect();
-        let count = self.out_positions.len();
         // LBS normals and tangents are normalised a block at a time (`lbs_normal_unnormalised`).
-        for start in (0..count).step_by(TILE) {
-            let end = (start + TILE).min(count);
-            for i in start..end {
+        for (start, len) in tiles(self.out_positions.len()) {
+            for i in start..start + len {
                 self.skin_one(kernel, i);
             }
             if self.method == Method::Lbs {
-                if let Some(o) = self.out_normals.as_deref_mut() {
-                    normalise_normals(&mut o[start..end]);
-                }
-                if let Some(o) = self.out_tangents.as_deref_mut() {
-                    normalise_tangents(&mut o[start..end]);
-                }
+                normalise_block(
+                    self.out_normals.as_deref_mut(),
+                    self.out_tangents.as_deref_mut(),
+                    start..start + len,
+                );
             }
         }
         Ok(())

@@ -1,5 +1,6 @@
 //! The fast path per frame: [`FastFrame`] (SkinNet at the nodes and their log-weight changes, or
-//! blended node matrices without a base, once per frame) and [`FastSkinJob`] (skinning any vertex range), with no heap allocation.
+//! blended node matrices without a base, once per frame) and [`FastSkinJob`] (skinning any
+//! vertex range), with no heap allocation.
 
 use alloc::vec;
 use alloc::vec::Vec;
@@ -14,11 +15,11 @@ use super::{Influence, MAX_INFLUENCES};
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
 use crate::job::{Scratch, VertexOutputs, WeightsJob};
-use crate::kernels::{TILE, blend, softmax_tile};
+use crate::kernels::{TILE, blend, softmax_tile, tiles};
 use crate::model::SkinNet;
 use crate::skinning::{
     DualQuat, Method, dqs, lbs_normal_unnormalised, lbs_point, lbs_tangent_unnormalised,
-    normalise_normals, normalise_tangents,
+    normalise_block,
 };
 
 /// Node weights are floored here before their logarithm: a joint the node gives (almost) no
@@ -244,13 +245,6 @@ impl BaseTile {
     }
 }
 
-/// `(start, len)` of the tiles of at most [`TILE`] outputs covering `0..count`.
-pub(crate) fn tiles(count: usize) -> impl Iterator<Item = (usize, usize)> {
-    (0..count)
-        .step_by(TILE)
-        .map(move |start| (start, TILE.min(count - start)))
-}
-
 /// Adds sparse `(joint, weight)` entries into dense weights `out`.
 fn scatter(entries: impl Iterator<Item = (usize, f32)>, out: &mut [f32]) {
     for (joint, weight) in entries {
@@ -471,11 +465,10 @@ impl FastSkinJob<'_> {
     /// Normalises the normals and tangents [`FastSkinJob::write_lbs`] wrote to outputs
     /// `range`, a block at a time (`skinning::lbs_normal_unnormalised` says why).
     fn normalise_lbs(&mut self, range: core::ops::Range<usize>) {
-        if let Some(o) = self.out_normals.as_deref_mut() {
-            normalise_normals(&mut o[range.clone()]);
-        }
-        if let Some(o) = self.out_tangents.as_deref_mut() {
-            normalise_tangents(&mut o[range]);
-        }
+        normalise_block(
+            self.out_normals.as_deref_mut(),
+            self.out_tangents.as_deref_mut(),
+            range,
+        );
     }
 }

@@ -5,11 +5,12 @@
 
 use skinfield_formats::MAX_JOINTS;
 
-use super::job::{BaseTile, FastFrame, check_range, tiles};
+use super::job::{BaseTile, FastFrame, check_range};
 use super::mesh::FastMesh;
 use super::{Influence, MAX_INFLUENCES};
 use crate::error::RuntimeError;
 use crate::frame::FrameState;
+use crate::kernels::tiles;
 
 /// The `out.len()` largest of `weights` (joint order; ties keep the lower joint first),
 /// strongest first, negative values clamped to zero and renormalised to sum to one. Slots past

@@ -24,6 +24,13 @@ pub(crate) use blend::blend;
 
 /// Vertices per tile (the GEMM's N dimension).
 pub const TILE: usize = 32;
+
+/// `(start, len)` of the tiles of at most [`TILE`] outputs covering `0..count`.
+pub(crate) fn tiles(count: usize) -> impl Iterator<Item = (usize, usize)> {
+    (0..count)
+        .step_by(TILE)
+        .map(move |start| (start, TILE.min(count - start)))
+}
 /// Output rows per weight panel (the GEMM's M blocking).
 pub(crate) const MR: usize = 8;
 

@@ -270,15 +270,9 @@ pub fn static_train_data(
     let Some(welded) = static_training_template(&capture.template) else {
         return Ok((train_data(capture, initial, &options)?, None));
     };
-    let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
-    if initial.vertex_count() != n || initial.joint_count() != j {
-        return Err(DataError::Inconsistent(format!(
-            "initial weights are {} vertices × {} joints, the template has {n} vertices and the \
-             skeleton {j} joints",
-            initial.vertex_count(),
-            initial.joint_count()
-        )));
-    }
+    // The weld reads the initial weights by vertex before `train_data` would check them.
+    check_initial(capture, initial)?;
+    let j = capture.skeleton.len();
     let first_copies = welded.restrict(&initial.to_dense(), j);
     let initial = StaticSkin::from_dense(&first_copies, j)
         .map_err(|e| DataError::Inconsistent(format!("initial weights of the weld: {e}")))?;
@@ -290,6 +284,20 @@ pub fn static_train_data(
     Ok((train_data(&capture, &initial, &options)?, Some(welded)))
 }
 
+/// Initial weights must cover `capture`'s template and skeleton.
+fn check_initial(capture: &Capture, initial: &StaticSkin) -> Result<(), DataError> {
+    let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
+    if initial.vertex_count() != n || initial.joint_count() != j {
+        return Err(DataError::Inconsistent(format!(
+            "initial weights are {} vertices × {} joints, the template has {n} vertices and the \
+             skeleton {j} joints",
+            initial.vertex_count(),
+            initial.joint_count()
+        )));
+    }
+    Ok(())
+}
+
 /// Builds the stage-1 training data from `capture`'s training frames.
 pub fn train_data(
     capture: &Capture,
@@ -299,14 +307,7 @@ pub fn train_data(
     capture.require_motion()?;
     let skeleton = capture.skeleton.clone();
     let j = skeleton.len();
-    if initial.vertex_count() != capture.template.vertex_count() || initial.joint_count() != j {
-        return Err(DataError::Inconsistent(format!(
-            "initial weights are {} vertices × {} joints, the template has {} vertices and the skeleton {j} joints",
-            initial.vertex_count(),
-            initial.joint_count(),
-            capture.template.vertex_count()
-        )));
-    }
+    check_initial(capture, initial)?;
     let (template, source) = simplify_template(&capture.template, options.train_vertices);
     let dense = initial.to_dense();
     let full = &capture.template;
