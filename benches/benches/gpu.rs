@@ -53,6 +53,7 @@ fn bench_gpu(c: &mut Criterion) {
         skeleton: skeleton.clone(),
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     for (l, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
         let s = 2.0 / (inp as f32).sqrt();

@@ -8,8 +8,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{
     self, ALIGN, Candidates, Dtype, HEADER_LEN, MAX_FILE_LEN, MAX_HIDDEN_LAYERS, MAX_TENSORS,
-    ModelConfig, Net, SECTION_ENTRY_LEN, SkfConfigError, SkfError, SkfModel, SkfView,
-    TENSOR_ENTRY_LEN, file_checksum, read_skf_file, tag,
+    ModelConfig, Net, PoseRange, SECTION_ENTRY_LEN, SkfConfigError, SkfError, SkfModel, SkfView,
+    TENSOR_ENTRY_LEN, Tag, file_checksum, read_skf_file, tag,
 };
 use skinfield_formats::{Skeleton, Transform};
 
@@ -52,6 +52,7 @@ fn model(config: ModelConfig, seed: u64) -> SkfModel {
         skeleton,
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
     for (i, (out, inp)) in shapes.into_iter().enumerate() {
@@ -181,17 +182,22 @@ fn every_truncated_prefix_is_an_error() {
             "cut {cut}: {e}"
         );
     }
-    // With a CAND section (version 1.1): every prefix too.
-    let bytes = with_candidates().to_bytes().unwrap();
-    SkfView::parse(&bytes).unwrap().candidates().unwrap();
-    for cut in 0..bytes.len() {
-        assert!(
-            matches!(
-                SkfView::parse(&bytes[..cut]),
-                Err(SkfError::Truncated { .. })
-            ),
-            "CAND file, cut {cut}"
-        );
+    // With a CAND section (version 1.1), and with CAND and PRNG (1.2): every prefix too.
+    for (name, m) in [
+        ("CAND", with_candidates()),
+        ("CAND + PRNG", with_pose_range()),
+    ] {
+        let bytes = m.to_bytes().unwrap();
+        SkfView::parse(&bytes).unwrap().candidates().unwrap();
+        for cut in 0..bytes.len() {
+            assert!(
+                matches!(
+                    SkfView::parse(&bytes[..cut]),
+                    Err(SkfError::Truncated { .. })
+                ),
+                "{name} file, cut {cut}"
+            );
+        }
     }
     // The full-size file: every prefix through the tables, then every 61st.
     let (_, bytes) = full();
@@ -216,6 +222,72 @@ fn with_candidates() -> SkfModel {
         k: 3,
     });
     m
+}
+
+/// The model with candidates and the training range of its 9 pose features (3 joints).
+fn with_pose_range() -> SkfModel {
+    let mut m = with_candidates();
+    let poses = [
+        [0.1f32, -0.2, 0.3, 0.0, 0.5, -0.5, 1.0, 0.0, 0.0],
+        [-0.1, 0.2, 0.3, 0.0, 0.25, 0.5, -1.0, 0.0, 0.0],
+    ];
+    m.pose_range = PoseRange::of(9, poses.iter().map(|p| &p[..]));
+    m
+}
+
+#[test]
+fn pose_range_round_trips_and_sets_the_minor_version() {
+    let m = with_pose_range();
+    let r = m.pose_range.clone().unwrap();
+    assert_eq!(r.low, [-0.1, -0.2, 0.3, 0.0, 0.25, -0.5, -1.0, 0.0, 0.0]);
+    assert_eq!(r.high, [0.1, 0.2, 0.3, 0.0, 0.5, 0.5, 1.0, 0.0, 0.0]);
+    let bytes = m.to_bytes().unwrap();
+    let v = SkfView::parse(&bytes).unwrap();
+    assert_eq!(v.minor_version(), 2);
+    let p = v.pose_range().unwrap();
+    assert_eq!(p.len(), 9);
+    for i in 0..9 {
+        assert_eq!((p.low(i), p.high(i)), (r.low[i], r.high[i]), "feature {i}");
+    }
+    // Without the range the same model is 1.1, without candidates 1.0.
+    let c = with_candidates().to_bytes().unwrap();
+    assert_eq!(SkfView::parse(&c).unwrap().minor_version(), 1);
+    assert!(SkfView::parse(&c).unwrap().pose_range().is_none());
+    assert_eq!(SkfView::parse(&small().1).unwrap().minor_version(), 0);
+    // A range that does not fit the skeleton is refused on writing, naming both counts.
+    let mut wrong = with_pose_range();
+    wrong.pose_range = Some(PoseRange {
+        low: vec![0.0; 6],
+        high: vec![0.0; 6],
+    });
+    let e = wrong.to_bytes().unwrap_err().to_string();
+    assert!(
+        e.contains("PRNG: 6 pose features, the skeleton has 9"),
+        "{e}"
+    );
+    wrong.pose_range = Some(PoseRange {
+        low: vec![0.0; 9],
+        high: vec![0.0; 8],
+    });
+    assert!(matches!(
+        wrong.to_bytes(),
+        Err(skf::SkfFileError::Invalid(_))
+    ));
+    assert_eq!(PoseRange::of(3, std::iter::empty()), None);
+    // In the file, a lower bound above its upper one is refused with its feature.
+    let (_, at, _) = section(&bytes, tag::PRNG);
+    let bad = patched(&bytes, |b| put(b, at + 16 + 4 * 4, &0.75f32.to_le_bytes()));
+    assert_eq!(parse_err(&bad), SkfError::BadPoseRange(4));
+    let twice = patched(&bytes, |b| {
+        let prng_entry = HEADER_LEN + 5 * SECTION_ENTRY_LEN;
+        let cand_entry = HEADER_LEN + 4 * SECTION_ENTRY_LEN;
+        put(b, cand_entry, &tag::PRNG);
+        assert_eq!(&b[prng_entry..prng_entry + 4], &tag::PRNG);
+    });
+    assert_eq!(
+        parse_err(&twice),
+        SkfError::DuplicateSection(Tag(tag::PRNG))
+    );
 }
 
 fn reseal(b: &mut [u8]) {
@@ -243,6 +315,11 @@ fn exercise(v: &SkfView<'_>) {
     let _ = s.to_skeleton();
     for i in 0..=v.config().hidden_count as usize + 1 {
         let _ = v.layer(Net::Skin, i);
+    }
+    if let Some(r) = v.pose_range() {
+        for i in 0..r.len() {
+            let _ = (r.low(i), r.high(i));
+        }
     }
 }
 
@@ -795,6 +872,11 @@ fn write_fuzz_seeds() {
     std::fs::write(
         dir.join("candidates.skf"),
         with_candidates().to_bytes().unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("pose_range.skf"),
+        with_pose_range().to_bytes().unwrap(),
     )
     .unwrap();
 }

@@ -140,8 +140,9 @@ impl FrameState {
         }
     }
 
-    /// Poses the frame: forward kinematics, pose features, pose terms. Never allocates; a NaN,
-    /// infinite or wrongly sized pose is an error and leaves the frame not ready.
+    /// Poses the frame: forward kinematics, pose features (clamped into the model's training
+    /// range when its file has one, [`SkinNet::pose_range`]), pose terms. Never allocates; a
+    /// NaN, infinite or wrongly sized pose is an error and leaves the frame not ready.
     pub fn set_pose<W: AsRef<[f32]>>(
         &mut self,
         model: &SkinNet<W>,
@@ -163,6 +164,11 @@ impl FrameState {
                 field: "pose features",
                 index: i,
             });
+        }
+        // Only what the network is asked about is clamped; the skinning matrices above keep the
+        // real pose (skinfield_formats::skf::pose_range says why).
+        for (f, &(low, high)) in self.features.iter_mut().zip(model.pose_range()) {
+            *f = f.clamp(low, high);
         }
         model.frame_bias(&self.features, &mut self.frame_bias);
         if let Some(i) = self.frame_bias.iter().position(|f| !f.is_finite()) {

@@ -147,6 +147,9 @@ pub struct SkinNet<W> {
     id: u64,
     /// The candidate joints of the canonical anchors (`CAND`); `None`: every joint everywhere.
     anchors: Option<crate::candidates::AnchorSet>,
+    /// Per pose feature, the training range `(low, high)` the features are clamped into
+    /// (`PRNG`); empty: not clamped.
+    pose_range: Vec<(f32, f32)>,
 }
 
 /// A SkinNet that owns its expanded weights.
@@ -206,13 +209,14 @@ impl SkinNetModel {
     pub fn from_view(view: &SkfView<'_>) -> Result<Self, RuntimeError> {
         let mut weights = vec![0.0; expanded_len(view.config())];
         let net = SkinNet::expand_into(view, &mut weights)?;
-        let (layout, config, skeleton, kernel, id, anchors) = (
+        let (layout, config, skeleton, kernel, id, anchors, pose_range) = (
             net.layout,
             net.config,
             net.skeleton,
             net.kernel,
             net.id,
             net.anchors,
+            net.pose_range,
         );
         Ok(SkinNet {
             weights,
@@ -222,6 +226,7 @@ impl SkinNetModel {
             kernel,
             id,
             anchors,
+            pose_range,
         })
     }
 
@@ -266,6 +271,10 @@ impl<'w> SkinNet<&'w [f32]> {
             anchors: view
                 .candidates()
                 .map(|c| crate::candidates::AnchorSet::from_view(&c)),
+            pose_range: view
+                .pose_range()
+                .map(|r| (0..r.len()).map(|i| (r.low(i), r.high(i))).collect())
+                .unwrap_or_default(),
         })
     }
 }
@@ -282,6 +291,13 @@ impl<W: AsRef<[f32]>> SkinNet<W> {
     #[must_use]
     pub fn anchors(&self) -> Option<&crate::candidates::AnchorSet> {
         self.anchors.as_ref()
+    }
+
+    /// Per pose feature, the range of the training poses that [`crate::FrameState::set_pose`]
+    /// clamps the features into (`PRNG`; empty for a file without one: not clamped).
+    #[must_use]
+    pub fn pose_range(&self) -> &[(f32, f32)] {
+        &self.pose_range
     }
 
     /// The file's skeleton (joint order = output order = pose-feature order).

@@ -116,6 +116,7 @@ fn random_skf_model(config: ModelConfig, seed: u64) -> (SkfModel, Skeleton, Pose
         skeleton: skeleton.clone(),
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (l, &(out, inp)) in shapes.iter().enumerate() {

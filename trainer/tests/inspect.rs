@@ -151,6 +151,7 @@ fn skf_model() {
         skeleton,
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     let shapes: Vec<(usize, usize)> = model.config.layer_shapes(Net::Skin).collect();
     for (i, (o, n)) in shapes.into_iter().enumerate() {
@@ -164,6 +165,19 @@ fn skf_model() {
     assert_eq!(json["kind"], "skf");
     assert_eq!(json["joints"], 3);
     assert_eq!(json["tensors"], 12);
+    assert_eq!(json["version"], "1.0");
+    assert_eq!(json["pose_range"], false);
+    // With the training range of its 9 pose features the file is version 1.2.
+    model.pose_range = Some(skinfield_formats::skf::PoseRange {
+        low: vec![-0.5; 9],
+        high: vec![0.5; 9],
+    });
+    model.write(&path).unwrap();
+    let (code, json, stderr) = inspect(&path);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(json["version"], "1.2");
+    assert_eq!(json["pose_range"], true);
+    assert_eq!(json["candidate_anchors"], 0);
 }
 
 #[test]

@@ -145,6 +145,7 @@ fn model_weights_drive_the_matching_skin() {
         skeleton: skin.skeleton.clone(),
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (i, (o, k)) in shapes.into_iter().enumerate() {

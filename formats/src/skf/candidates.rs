@@ -18,7 +18,7 @@
 //! below the joint count and strictly ascending before the padding; positions are finite.
 
 use super::tag;
-use super::view::{SkfError, Tag};
+use super::view::{SkfError, Tag, check_header_len, le_f32, le_u16, le_u32};
 use alloc::vec::Vec;
 
 /// Cap on the number of anchors.
@@ -39,29 +39,11 @@ pub struct CandidatesView<'a> {
     k: usize,
 }
 
-fn le_u16(b: &[u8], at: usize) -> u16 {
-    u16::from_le_bytes([b[at], b[at + 1]])
-}
-
-fn le_u32(b: &[u8], at: usize) -> u32 {
-    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
-}
-
-fn le_f32(b: &[u8], at: usize) -> f32 {
-    f32::from_bits(le_u32(b, at))
-}
-
 impl<'a> CandidatesView<'a> {
     /// Validates a `CAND` section body for a skeleton of `joints` joints.
     pub fn parse(body: &'a [u8], joints: usize) -> Result<Self, SkfError> {
         let tag = Tag(tag::CAND);
-        if body.len() < CAND_HEADER_LEN {
-            return Err(SkfError::SectionLength {
-                tag,
-                len: body.len() as u64,
-                expected: CAND_HEADER_LEN as u64,
-            });
-        }
+        check_header_len(body, tag, CAND_HEADER_LEN)?;
         let count = le_u32(body, 0) as usize;
         let k = le_u32(body, 4) as usize;
         if le_u32(body, 8) != 0 || le_u32(body, 12) != 0 {

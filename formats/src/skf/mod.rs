@@ -14,6 +14,8 @@
 //! DATA             tensor bytes, each tensor 64-byte aligned
 //! CAND             (version 1.1, optional) candidate joints of canonical anchors, see
 //!                  [`candidates`]
+//! PRNG             (version 1.2, optional) the training range of the pose features, see
+//!                  [`pose_range`]
 //! ```
 //!
 //! Every section starts on a 64-byte boundary; the bytes between sections are zero padding of
@@ -27,23 +29,26 @@
 
 pub mod candidates;
 mod config;
+pub mod pose_range;
 mod view;
 #[cfg(feature = "std")]
 mod write;
 
 pub use candidates::CandidatesView;
 pub use config::{ModelConfig, Net, SkfConfigError};
+pub use pose_range::PoseRangeView;
 pub use view::{Dtype, SkeletonView, SkfError, SkfView, Tag, TensorName, TensorView};
 #[cfg(feature = "std")]
-pub use write::{Candidates, SkfFileError, SkfModel, read_skf_file, write_atomic};
+pub use write::{Candidates, PoseRange, SkfFileError, SkfModel, read_skf_file, write_atomic};
 
 /// File magic.
 pub const MAGIC: [u8; 8] = *b"SKINFLD\0";
 /// Major version this crate reads and writes.
 pub const VERSION_MAJOR: u16 = 1;
-/// Minor version this crate writes for a file with a `CAND` section (files without one are
-/// written as 1.0, which every reader of major version 1 reads).
-pub const VERSION_MINOR: u16 = 1;
+/// Highest minor version this crate writes: 1.2 for a file with a `PRNG` section, 1.1 for one
+/// with `CAND` but no `PRNG`, 1.0 for neither (so each file declares the oldest format that
+/// describes it; a reader of major version 1 skips the sections it does not know).
+pub const VERSION_MINOR: u16 = 2;
 /// Size of the fixed header.
 pub const HEADER_LEN: usize = 64;
 /// Size of one section-table entry.
@@ -85,6 +90,8 @@ pub mod tag {
     pub const DATA: [u8; 4] = *b"DATA";
     /// Candidate joints of canonical anchors (version 1.1).
     pub const CAND: [u8; 4] = *b"CAND";
+    /// Training range of the pose features (version 1.2).
+    pub const PRNG: [u8; 4] = *b"PRNG";
 }
 
 /// FNV-1a 64 over `bytes`, continuing from `state` (start with [`FNV_OFFSET`]).

@@ -131,6 +131,17 @@ pub enum SkfError {
     /// joint, names a joint the skeleton lacks or continues after its padding.
     #[error("CAND: anchor {0} is invalid")]
     BadAnchor(u32),
+    /// The `PRNG` section's feature count is not the skeleton's pose-feature count.
+    #[error("PRNG: {count} pose features, the skeleton has {expected}")]
+    PoseRangeCount {
+        /// Count in the section.
+        count: u32,
+        /// `3 × joint count`.
+        expected: u64,
+    },
+    /// A `PRNG` bound is not finite, or a lower bound exceeds its upper one.
+    #[error("PRNG: the range of pose feature {0} is invalid")]
+    BadPoseRange(u32),
     /// A section has the wrong length for its contents.
     #[error("section `{tag}` is {len} bytes, expected {expected}")]
     SectionLength {
@@ -429,13 +440,14 @@ pub struct SkfView<'a> {
     data: &'a [u8],
     minor: u16,
     candidates: Option<super::candidates::CandidatesView<'a>>,
+    pose_range: Option<super::pose_range::PoseRangeView<'a>>,
 }
 
-fn le_u16(b: &[u8], at: usize) -> u16 {
+pub(super) fn le_u16(b: &[u8], at: usize) -> u16 {
     u16::from_le_bytes([b[at], b[at + 1]])
 }
 
-fn le_u32(b: &[u8], at: usize) -> u32 {
+pub(super) fn le_u32(b: &[u8], at: usize) -> u32 {
     u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
 }
 
@@ -445,8 +457,20 @@ fn le_u64(b: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(a)
 }
 
-fn le_f32(b: &[u8], at: usize) -> f32 {
+pub(super) fn le_f32(b: &[u8], at: usize) -> f32 {
     f32::from_bits(le_u32(b, at))
+}
+
+/// Checks that an optional section's body holds at least its fixed header.
+pub(super) fn check_header_len(body: &[u8], tag: Tag, header_len: usize) -> Result<(), SkfError> {
+    if body.len() < header_len {
+        return Err(SkfError::SectionLength {
+            tag,
+            len: body.len() as u64,
+            expected: header_len as u64,
+        });
+    }
+    Ok(())
 }
 
 /// Checks that `[start, end)` is fewer than [`ALIGN`] zero bytes.
@@ -515,7 +539,7 @@ impl<'a> SkfView<'a> {
                 len,
             });
         }
-        let mut found: [Option<&[u8]>; 5] = [None; 5];
+        let mut found: [Option<&[u8]>; 6] = [None; 6];
         let mut cursor = table_end;
         for s in 0..section_count as usize {
             let e = &bytes
@@ -547,6 +571,7 @@ impl<'a> SkfView<'a> {
                 tag::TINF => 2,
                 tag::DATA => 3,
                 tag::CAND => 4,
+                tag::PRNG => 5,
                 _ => continue,
             };
             if found[slot].is_some() {
@@ -581,6 +606,13 @@ impl<'a> SkfView<'a> {
             )?),
             None => None,
         };
+        let pose_range = match found[5] {
+            Some(body) => Some(super::pose_range::PoseRangeView::parse(
+                body,
+                crate::pose_feature_count(config.joint_count as usize),
+            )?),
+            None => None,
+        };
         let view = Self {
             config,
             skeleton,
@@ -588,6 +620,7 @@ impl<'a> SkfView<'a> {
             data,
             minor,
             candidates,
+            pose_range,
         };
         for net in [Net::Skin, Net::Albedo, Net::Shadow] {
             if config.nets & net.bit() != 0 {
@@ -806,6 +839,13 @@ impl<'a> SkfView<'a> {
     #[must_use]
     pub fn candidates(&self) -> Option<super::candidates::CandidatesView<'a>> {
         self.candidates
+    }
+
+    /// The training range of the pose features (`PRNG`), if the file has it; without it the
+    /// features are not clamped.
+    #[must_use]
+    pub fn pose_range(&self) -> Option<super::pose_range::PoseRangeView<'a>> {
+        self.pose_range
     }
 
     /// The stored skeleton (joint order = SkinNet output order = pose-feature order).

@@ -21,6 +21,37 @@ pub struct SkfModel {
     pub tensors: Vec<(String, Vec<usize>, Vec<f32>)>,
     /// The candidate joints of canonical anchors (the `CAND` section), if any.
     pub candidates: Option<Candidates>,
+    /// The training range of the pose features (the `PRNG` section), if any.
+    pub pose_range: Option<PoseRange>,
+}
+
+/// Per pose feature, the smallest and largest value SkinNet was trained on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseRange {
+    /// Lower bounds, one per pose feature.
+    pub low: Vec<f32>,
+    /// Upper bounds, one per pose feature.
+    pub high: Vec<f32>,
+}
+
+impl PoseRange {
+    /// The per-feature minimum and maximum over `poses` (each `features` long); `None` without
+    /// poses.
+    #[must_use]
+    pub fn of<'a>(features: usize, poses: impl IntoIterator<Item = &'a [f32]>) -> Option<Self> {
+        let mut range: Option<Self> = None;
+        for theta in poses {
+            let r = range.get_or_insert_with(|| Self {
+                low: vec![f32::INFINITY; features],
+                high: vec![f32::NEG_INFINITY; features],
+            });
+            for ((lo, hi), &v) in r.low.iter_mut().zip(&mut r.high).zip(theta) {
+                *lo = lo.min(v);
+                *hi = hi.max(v);
+            }
+        }
+        range
+    }
 }
 
 /// Anchors in the canonical space and the joints a point near each may be skinned to.
@@ -196,6 +227,17 @@ impl SkfModel {
             Some(c) => Some(candidates::cand_bytes(&c.positions, &c.lists, c.k)),
             None => None,
         };
+        let prng = match &self.pose_range {
+            Some(r) if r.low.len() != r.high.len() => {
+                return Err(invalid(format!(
+                    "pose range has {} lower and {} upper bounds",
+                    r.low.len(),
+                    r.high.len()
+                )));
+            }
+            Some(r) => Some(pose_range::prng_bytes(&r.low, &r.high)),
+            None => None,
+        };
         let mut sections: Vec<(&[u8; 4], &[u8])> = vec![
             (&tag::CONF, &conf),
             (&tag::SKEL, &skel),
@@ -204,6 +246,9 @@ impl SkfModel {
         ];
         if let Some(c) = &cand {
             sections.push((&tag::CAND, c));
+        }
+        if let Some(r) = &prng {
+            sections.push((&tag::PRNG, r));
         }
         let mut out = vec![0u8; HEADER_LEN + SECTION_ENTRY_LEN * sections.len()];
         for (s, (t, body)) in sections.iter().enumerate() {
@@ -217,7 +262,11 @@ impl SkfModel {
         }
         out[..8].copy_from_slice(&MAGIC);
         out[8..10].copy_from_slice(&VERSION_MAJOR.to_le_bytes());
-        let minor = if cand.is_some() { VERSION_MINOR } else { 0 };
+        let minor = match (&cand, &prng) {
+            (_, Some(_)) => VERSION_MINOR,
+            (Some(_), None) => 1,
+            (None, None) => 0,
+        };
         out[10..12].copy_from_slice(&minor.to_le_bytes());
         out[12..16].copy_from_slice(&(sections.len() as u32).to_le_bytes());
         let len = out.len() as u64;
@@ -306,6 +355,7 @@ mod tests {
             skeleton,
             tensors: Vec::new(),
             candidates: None,
+            pose_range: None,
         };
         for (i, (out, inp)) in config.layer_shapes(Net::Skin).enumerate() {
             model.push_layer(Net::Skin, i, vec![0.5; out * inp], out, inp, vec![0.0; out]);

@@ -56,6 +56,7 @@ pub fn random_model(config: ModelConfig, seed: u64) -> SkfModel {
         skeleton,
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     let shapes: Vec<_> = config.layer_shapes(Net::Skin).collect();
     for (i, (out, inp)) in shapes.into_iter().enumerate() {

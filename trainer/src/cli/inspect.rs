@@ -148,6 +148,20 @@ fn inspect_skf(path: &Path) -> anyhow::Result<Report> {
     extra.insert("tensors".into(), view.tensor_count().into());
     extra.insert("pe_frequencies".into(), config.pe_frequencies.into());
     extra.insert("hidden".into(), config.hidden_widths().to_vec().into());
+    extra.insert(
+        "version".into(),
+        format!(
+            "{}.{}",
+            skinfield_formats::skf::VERSION_MAJOR,
+            view.minor_version()
+        )
+        .into(),
+    );
+    extra.insert(
+        "candidate_anchors".into(),
+        view.candidates().map_or(0, |c| c.len()).into(),
+    );
+    extra.insert("pose_range".into(), view.pose_range().is_some().into());
     Ok(Report {
         kind: "skf",
         vertices: 0,

@@ -33,6 +33,7 @@ pub(super) fn root_only_skf(capture: &Capture, path: &Path) -> SkfModel {
         skeleton: capture.skeleton.clone(),
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     let shapes: Vec<(usize, usize)> = config.layer_shapes(Net::Skin).collect();
     let last = shapes.len() - 1;

@@ -41,6 +41,7 @@ pub fn to_skf_model(net: &TrainableSkinNet, skeleton: &Skeleton) -> Result<SkfMo
         skeleton: skeleton.clone(),
         tensors: Vec::new(),
         candidates: None,
+        pose_range: None,
     };
     for (i, layer) in net.layers().iter().enumerate() {
         let w = layer.weight()?.to_dtype(candle_core::DType::F32)?;

@@ -532,15 +532,17 @@ impl Trainer {
         &self.profile
     }
 
-    /// The network as `.skf` content with its candidate joints (the `CAND` section): what
-    /// `trainer train` writes. Exporting the network alone would let every joint back into a
-    /// softmax that was trained over the candidates only.
+    /// The network as `.skf` content with its candidate joints (the `CAND` section) and the
+    /// range of its training poses (`PRNG`): what `trainer train` writes. Exporting the network
+    /// alone would let every joint back into a softmax that was trained over the candidates
+    /// only, and let the runtime ask it about poses it never saw.
     pub fn skf_model(&self) -> Result<skinfield_formats::skf::SkfModel, TrainError> {
         let net = self
             .net()
             .ok_or_else(|| TrainError::Data("the static baseline has no network".into()))?;
         let mut model = crate::skinnet::export::to_skf_model(net, &self.data.skeleton)?;
         model.candidates = self.export_candidates();
+        model.pose_range = self.export_pose_range();
         Ok(model)
     }
 
@@ -559,6 +561,27 @@ impl Trainer {
             Model::Static { .. } => Ok(Some(self.weights(&[0])?.flatten_all()?.to_vec1()?)),
             Model::Net { .. } => Ok(None),
         }
+    }
+
+    /// The per-feature range of the training frames' pose features (validation frames
+    /// included, so what validation scored is what the runtime evaluates), or `None` when
+    /// [`TrainConfig::clamp_pose_features`] is off.
+    #[must_use]
+    pub fn export_pose_range(&self) -> Option<skinfield_formats::skf::PoseRange> {
+        let features = skinfield_formats::pose_feature_count(self.data.skeleton.len());
+        self.config
+            .clamp_pose_features
+            .then(|| {
+                skinfield_formats::skf::PoseRange::of(
+                    features,
+                    self.data
+                        .frames
+                        .iter()
+                        .chain(&self.validation)
+                        .map(|f| &f.pose_features[..]),
+                )
+            })
+            .flatten()
     }
 
     /// The anchors and candidate joints to store in the exported `.skf` (the training template's

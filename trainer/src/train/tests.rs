@@ -870,3 +870,24 @@ fn the_exported_model_records_the_captures_up_axis() {
         assert_eq!(trainer.skf_model().unwrap().config.up_axis, axis);
     }
 }
+
+#[test]
+fn the_exported_model_records_the_training_poses_feature_range() {
+    // The scene bends joint 1 about z by 0.9, -0.7, 1.2, 0.5 and -1.0 rad: its third feature
+    // ranges over [-1.0, 1.2], every other feature is zero.
+    let (data, _) = scene(5);
+    let trainer = Trainer::new(data.clone(), config(), false).unwrap();
+    let range = trainer.skf_model().unwrap().pose_range.unwrap();
+    let (mut low, mut high) = ([0.0f32; 6], [0.0f32; 6]);
+    (low[5], high[5]) = (-1.0, 1.2);
+    for i in 0..6 {
+        assert!((range.low[i] - low[i]).abs() < 1e-6, "{range:?}");
+        assert!((range.high[i] - high[i]).abs() < 1e-6, "{range:?}");
+    }
+    let off = TrainConfig {
+        clamp_pose_features: false,
+        ..config()
+    };
+    let trainer = Trainer::new(data, off, false).unwrap();
+    assert_eq!(trainer.skf_model().unwrap().pose_range, None);
+}
