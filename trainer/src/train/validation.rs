@@ -127,12 +127,15 @@ pub fn held_out_indices(n: usize, count: usize) -> Vec<usize> {
 /// Moves the frames [`held_out_indices`] picks out of `data.frames` and returns them (none:
 /// the caller validates on the training frames).
 pub(crate) fn hold_out(data: &mut TrainData, count: usize) -> Vec<Frame> {
-    let picked = held_out_indices(data.frames.len(), count);
-    let mut held: Vec<Frame> = picked
-        .iter()
-        .rev()
-        .map(|&i| data.frames.remove(i))
-        .collect();
+    take_held_out(&mut data.frames, count)
+}
+
+/// Removes the items [`held_out_indices`] picks for `count` out of `items` and returns them in
+/// order: what [`hold_out`] does to the frames, for anything listed per training frame (the
+/// colour images of stages 2–4).
+pub(crate) fn take_held_out<T>(items: &mut Vec<T>, count: usize) -> Vec<T> {
+    let picked = held_out_indices(items.len(), count);
+    let mut held: Vec<T> = picked.iter().rev().map(|&i| items.remove(i)).collect();
     held.reverse();
     held
 }

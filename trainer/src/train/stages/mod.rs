@@ -71,7 +71,9 @@ pub struct StageConfig {
     pub pixels_per_view: usize,
     /// Views rendered per frame and iteration (0 = all).
     pub views_per_frame: usize,
-    /// Weight of the rendering loss in stage 4 (per-sample L1 summed over RGB).
+    /// Weight of the rendering loss in stage 4 (per-sample L1 summed over RGB). At 0 stage 4
+    /// renders nothing: SkinNet continues with stage 1's losses on stage 4's learning-rate
+    /// schedule (the "w/o L_rend" control of the ablation).
     pub rendering_weight: f64,
     /// Colours used by the rendering loss in stage 4.
     pub colours: ColourSource,
@@ -459,6 +461,14 @@ impl Trainer {
         resume: bool,
     ) -> Result<Appearance, TrainError> {
         let config = self.config.stages;
+        let mut images = images;
+        if !self.validation.is_empty()
+            && images.len() == self.data.frames.len() + self.validation.len()
+        {
+            // Images of every training frame, as `load_images` reads them: the frames held out
+            // for validation take no part in stages 2–4.
+            super::validation::take_held_out(&mut images, self.config.validation_frames);
+        }
         if images.len() != self.data.frames.len()
             || images
                 .iter()
@@ -560,13 +570,16 @@ impl Trainer {
             }
             b.finish();
         }
+        // λ_rend = 0 is stage 1's losses on stage 4's schedule: the ablation's control, which
+        // renders nothing.
+        let rendered = config.rendering_weight > 0.0;
         if state.progress.refine < config.refine_iterations {
-            if !use_nets && state.fixed.is_none() {
+            if rendered && !use_nets && state.fixed.is_none() {
                 let c = self.canonical_vertex_colours(&images)?;
                 let flat: Vec<f32> = c.iter().flat_map(|v| v.to_array()).collect();
                 state.fixed = Some(Tensor::from_vec(flat, (c.len(), 3), &Device::Cpu)?);
             }
-            self.rendering = Some(RenderingTerm {
+            self.rendering = rendered.then(|| RenderingTerm {
                 images,
                 appearance: appearance.clone(),
                 fixed: state.fixed.clone(),

@@ -208,6 +208,31 @@ fn fixed_colours_come_from_the_images_and_mismatched_images_are_rejected() {
     ));
 }
 
+/// `load_images` reads every training frame; with frames held out for validation the stages
+/// take the images of the frames they train on.
+#[test]
+fn stages_run_with_frames_held_out_for_validation() {
+    let (data, truth) = scene(8);
+    let imgs = images(&data, &truth, albedo);
+    let dir = tempfile::tempdir().unwrap();
+    let config = TrainConfig {
+        validation_frames: 2,
+        validation_every: 2,
+        ..stage_config(3, 0, 2)
+    };
+    let mut t = Trainer::new(data, config, false).unwrap();
+    t.run(dir.path(), false).unwrap();
+    let mut short = imgs.clone();
+    short.pop();
+    assert!(matches!(
+        t.run_stages(short, dir.path(), false),
+        Err(TrainError::Data(_))
+    ));
+    t.run_stages(imgs, dir.path(), false).unwrap();
+    assert_eq!(rows(dir.path(), "2,").len(), 3);
+    assert_eq!(rows(dir.path(), "4,").len(), 2);
+}
+
 #[test]
 fn stage_config_reads_from_json_and_names_bad_fields() {
     let dir = tempfile::tempdir().unwrap();
