@@ -1,12 +1,16 @@
 //! `trainer demo --ablations`: the rows of the paper's Table 2 that apply to the built-in
 //! capture, each trained and scored on the held-out test poses.
 //!
-//! Rows: initial (bone heat); static weights; w/o L_rend (stage 1, continued for as many
-//! iterations as stage 4 has, without the rendering loss, so the SkinNet budget is equal);
-//! w/ albedo only (stages 1, 2, 4); w/ fixed vertex colours (stage 1, then stage 4 with colours
-//! read from the first training frame's images); ours (stages 1–4); ours with fewer cameras
-//! (stages 1–4 on the first `--ablation-cameras` cameras). The rows with every camera share one
-//! stage-1 run (its checkpoint), so they differ only in what follows it.
+//! Rows: initial (bone heat); static weights; stage 1 only (what the plain demo exports);
+//! w/o L_rend (stage 4 with λ_rend = 0: stage 1's losses for stage 4's iterations on its
+//! learning-rate schedule, so the SkinNet budget is equal); w/ albedo only (stages 1, 2, 4);
+//! w/ fixed vertex colours (stage 1, then stage 4 with colours read from the first training
+//! frame's images); ours (stages 1–4); ours with fewer cameras (stages 1–4 on the first
+//! `--ablation-cameras` cameras); silhouettes only (stage 1 from the warm start with every
+//! regulariser off, the Laplacian included, for stage 1's and stage 4's iterations together).
+//! The rows with every camera but the last share one stage-1 run (its checkpoint), so they
+//! differ only in what follows it; the variants continue from that run's last parameter
+//! average, the stage-1 row is its best-validated average (as the demo exports it).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -19,11 +23,17 @@ use skinfield_formats::capture::Capture;
 use skinfield_formats::skf::write_atomic;
 use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
 use skinfield_trainer::eval::{EvalOptions, Skinning, evaluate};
-use skinfield_trainer::train::data::{DataOptions, train_data};
+use skinfield_trainer::train::data::{DataOptions, TrainData, train_data};
 use skinfield_trainer::train::stages::{ColourSource, StageConfig, load_images};
-use skinfield_trainer::train::{TrainConfig, Trainer};
+use skinfield_trainer::train::{LossWeights, TrainConfig, Trainer};
 
 use super::train::train_static;
+
+/// The row every other is compared with: all four stages, every camera.
+pub const FULL_METHOD: &str = "ours";
+
+/// The row of stage 1 alone, exported as the plain demo exports it.
+pub const STAGE1_METHOD: &str = "stage 1 only (the demo's SkinNet)";
 
 /// Options of `trainer demo --ablations`.
 #[derive(ClapArgs, Debug, Clone)]
@@ -61,7 +71,6 @@ pub struct AblationArgs {
 struct Variant {
     name: &'static str,
     stages: StageConfig,
-    extra_stage1: u64,
 }
 
 /// Trains and scores every row; writes `out/ablations.{md,json}` and returns the rows with
@@ -75,12 +84,7 @@ pub fn run(
     out: &Path,
     progress: bool,
 ) -> anyhow::Result<Vec<(EvalRow, f64)>> {
-    let eval = |s: &Skinning, name: &str| -> anyhow::Result<EvalRow> {
-        let mut row = evaluate(capture, s, &EvalOptions::default())
-            .with_context(|| format!("evaluating `{name}`"))?;
-        row.method = name.to_string();
-        Ok(row)
-    };
+    let eval = |s: &Skinning, name: &str| eval_row(capture, s, name);
     // An ablation reports every variant, a worse one too: no refusal.
     let base = TrainConfig {
         refuse_worse_than_initial: false,
@@ -114,17 +118,18 @@ pub fn run(
         image_blur_px: args.image_blur_px,
         ..StageConfig::default()
     };
-    let none = StageConfig {
-        albedo_iterations: 0,
-        shadow_iterations: 0,
-        refine_iterations: 0,
-        ..full
-    };
     let variants = [
+        // Stage 4 with λ_rend = 0: the same iterations on the same learning-rate schedule,
+        // only without the rendering term (continuing stage 1's schedule instead would give
+        // the control 100 steps at the tail of a cosine, next to nothing).
         Variant {
             name: "w/o L_rend",
-            stages: none,
-            extra_stage1: args.refine_iterations,
+            stages: StageConfig {
+                albedo_iterations: 0,
+                shadow_iterations: 0,
+                rendering_weight: 0.0,
+                ..full
+            },
         },
         Variant {
             name: "w/ albedo only",
@@ -133,7 +138,6 @@ pub fn run(
                 colours: ColourSource::AlbedoOnly,
                 ..full
             },
-            extra_stage1: 0,
         },
         Variant {
             name: "w/ fixed vertex colours",
@@ -143,12 +147,10 @@ pub fn run(
                 colours: ColourSource::FixedVertexColours,
                 ..full
             },
-            extra_stage1: 0,
         },
         Variant {
-            name: "ours",
+            name: FULL_METHOD,
             stages: full,
-            extra_stage1: 0,
         },
     ];
 
@@ -172,11 +174,19 @@ pub fn run(
                 cameras
             }
         );
+        if cameras == 0 {
+            // Stage 1 as the plain demo exports it (the best-validated average), so the
+            // table also holds the demo's SkinNet row of this seed.
+            stage1.adopt_average()?;
+            let path = stage1_dir.join("model.skf");
+            stage1.skf_model()?.write(&path)?;
+            rows.push((eval(&Skinning::Skf(path), STAGE1_METHOD)?, stage1_s));
+        }
         drop(stage1);
         let list: Vec<&Variant> = if cameras == 0 {
             variants.iter().collect()
         } else {
-            variants.iter().filter(|v| v.name == "ours").collect()
+            variants.iter().filter(|v| v.name == FULL_METHOD).collect()
         };
         for v in list {
             let name = if cameras == 0 {
@@ -187,7 +197,6 @@ pub fn run(
             let dir = out.join(format!("ablation-{}", name.replace(['/', ' ', ','], "_")));
             let t = Instant::now();
             let config = TrainConfig {
-                iterations: base.iterations + v.extra_stage1,
                 stages: v.stages,
                 ..base.clone()
             };
@@ -202,9 +211,11 @@ pub fn run(
             };
             trainer.adopt_average()?;
             let mut model = trainer.skf_model()?;
-            if let Some(a) =
-                appearance.filter(|_| v.stages.colours != ColourSource::FixedVertexColours)
-            {
+            // Untrained appearance nets (fixed colours, or no rendering) are not stored.
+            if let Some(a) = appearance.filter(|_| {
+                v.stages.colours != ColourSource::FixedVertexColours
+                    && v.stages.rendering_weight > 0.0
+            }) {
                 a.push_to_skf(&mut model)?;
             }
             let path = dir.join("model.skf");
@@ -216,6 +227,11 @@ pub fn run(
                 row.chamfer_cm
             );
             rows.push((row, seconds));
+        }
+        if cameras == 0 {
+            rows.push(silhouettes_only(
+                capture, &data, &base, args, out, progress,
+            )?);
         }
     }
 
@@ -254,4 +270,47 @@ pub fn run(
     write_atomic(&json_path, rows_to_json(&plain).as_bytes())
         .with_context(|| json_path.display().to_string())?;
     Ok(rows)
+}
+
+/// `skinning` scored on the capture's test frames, as the row `name`.
+fn eval_row(capture: &Capture, skinning: &Skinning, name: &str) -> anyhow::Result<EvalRow> {
+    let mut row = evaluate(capture, skinning, &EvalOptions::default())
+        .with_context(|| format!("evaluating `{name}`"))?;
+    row.method = name.to_string();
+    Ok(row)
+}
+
+/// The "silhouettes only" row: stage 1 from the warm start with the Laplacian and the skinning
+/// regularisers off, for as many image iterations as stage 1 and stage 4 together, so the row
+/// says what the silhouette terms alone do to the weights.
+fn silhouettes_only(
+    capture: &Capture,
+    data: &TrainData,
+    base: &TrainConfig,
+    args: &AblationArgs,
+    out: &Path,
+    progress: bool,
+) -> anyhow::Result<(EvalRow, f64)> {
+    let name = "silhouettes only";
+    let dir = out.join("ablation-silhouettes_only");
+    let config = TrainConfig {
+        iterations: base.iterations + args.refine_iterations,
+        weights: LossWeights {
+            laplacian: 0.0,
+            skinning: 0.0,
+            partwise: 0.0,
+            ..base.weights
+        },
+        ..base.clone()
+    };
+    let t = Instant::now();
+    let mut trainer = Trainer::new(data.clone(), config, false)?;
+    trainer.run(&dir, progress)?;
+    trainer.adopt_average()?;
+    let path = dir.join("model.skf");
+    trainer.skf_model()?.write(&path)?;
+    let seconds = t.elapsed().as_secs_f64();
+    let row = eval_row(capture, &Skinning::Skf(path), name)?;
+    println!("{name}: Chamfer {:.3} cm ({seconds:.0} s)", row.chamfer_cm);
+    Ok((row, seconds))
 }
