@@ -115,7 +115,8 @@ pub struct Trainer {
     warm_window: std::collections::VecDeque<(f64, f64)>,
     /// Whether the warm start has converged.
     warm_converged: bool,
-    /// The template's bounding-box diagonal (the warm start's position scale).
+    /// The template's bounding-box diagonal (the length scale of the warm start's position
+    /// error and of the Laplacian term).
     diagonal: f64,
     /// The held-out frames ([`validation`]); empty when too few frames were given (the
     /// training frames are scored instead).
@@ -370,6 +371,16 @@ impl Trainer {
             adam.lr = config.static_lr;
         }
         adam
+    }
+
+    /// The learning rate of warm-start iteration `done` (0-based): `adam.lr` halved every
+    /// `warm_start_lr_halving` iterations.
+    fn warm_lr(&self, done: u64) -> f64 {
+        let halvings = done
+            .checked_div(self.config.warm_start_lr_halving)
+            .unwrap_or(0)
+            .min(64);
+        self.config.adam.lr * 0.5f64.powi(halvings as i32)
     }
 
     /// The learning rate of image iteration `done` (0-based). Stage 1: a linear ramp over

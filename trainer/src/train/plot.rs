@@ -50,7 +50,7 @@ pub enum PlotError {
 pub fn unit_of(column: &str) -> &'static str {
     match column {
         c if c.ends_with("_px") || c.starts_with("silhouette") => "pixels",
-        "laplacian" => "m²",
+        "laplacian" => "diagonal²",
         "iou" => "intersection / union",
         "position_cm2" => "cm²",
         "kl" => "nats",
@@ -267,7 +267,7 @@ mod tests {
         for text in [
             "SkinNet losses",
             "silhouette_boundary (pixels)",
-            "laplacian (m²)",
+            "laplacian (diagonal²)",
             "iteration",
             "pixels (log scale)",
             "moving average (25 points)",

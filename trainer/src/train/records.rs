@@ -15,7 +15,7 @@ pub struct LossRecord {
     pub silhouette_boundary: f64,
     /// Mean contour-pixel distance (pixels).
     pub silhouette_contour: f64,
-    /// Mean squared Laplacian per vertex.
+    /// Mean squared Laplacian per vertex, over the squared bounding-box diagonal.
     pub laplacian: f64,
     /// Mean geodesic penalty per vertex.
     pub skinning: f64,

@@ -25,6 +25,7 @@ impl Trainer {
             self.warm_done += 1;
             return Ok(WarmRecord::default());
         }
+        self.optimiser.set_lr(self.warm_lr(self.warm_done));
         const KIND: IterationKind = IterationKind::Warm;
         let mut timer = Timer::start();
         let frames = self.sample(PHASE_WARM, self.warm_done);
@@ -138,7 +139,9 @@ impl Trainer {
                 (&posed - self.initial_posing(&init, &skinning, &rest, b)?)?
             }
         };
-        let lap = (self.laplacian.loss(&lap_input)? / (b as f64 * v))?;
+        // Relative to the character's size (`LossWeights::laplacian`).
+        let lap =
+            (self.laplacian.loss(&lap_input)? / (b as f64 * v * self.diagonal * self.diagonal))?;
         let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
         let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
         let lw = self.config.weights;

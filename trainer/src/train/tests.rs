@@ -9,16 +9,19 @@ use crate::losses::silhouette::SilhouetteTarget;
 /// elbow at y = 0.5. Ground truth: a smooth blend over y ∈ [0.35, 0.65]; initial weights: a hard
 /// step at y = 0.25, well below the elbow (what the training has to move away from).
 pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
+    scene_scaled(frames, 1.0)
+}
+
+/// [`scene`] with every length multiplied by `scale` (template, bones, cameras): the same images.
+fn scene_scaled(frames: usize, scale: f32) -> (TrainData, Vec<f32>) {
     let (around, rings) = (12usize, 11usize);
     let mut positions = Vec::new();
     for r in 0..rings {
         for a in 0..around {
             let t = a as f32 / around as f32 * core::f32::consts::TAU;
-            positions.push(Vec3::new(
-                0.1 * t.cos(),
-                r as f32 / (rings - 1) as f32,
-                0.1 * t.sin(),
-            ));
+            positions.push(
+                Vec3::new(0.1 * t.cos(), r as f32 / (rings - 1) as f32, 0.1 * t.sin()) * scale,
+            );
         }
     }
     let mut triangles = Vec::new();
@@ -42,7 +45,7 @@ pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
         vec![None, Some(0)],
         vec![
             Transform::IDENTITY,
-            Transform::from_translation(Vec3::new(0.0, 0.5, 0.0)),
+            Transform::from_translation(Vec3::new(0.0, 0.5 * scale, 0.0)),
         ],
         None,
         None,
@@ -54,22 +57,28 @@ pub(super) fn scene(frames: usize) -> (TrainData, Vec<f32>) {
         .positions
         .iter()
         .flat_map(|p| {
-            let b = blend(p.y, 0.35, 0.65);
+            let b = blend(p.y / scale, 0.35, 0.65);
             [1.0 - b, b]
         })
         .collect();
     let init: Vec<f32> = template
         .positions
         .iter()
-        .flat_map(|p| if p.y > 0.25 { [0.0, 1.0] } else { [1.0, 0.0] })
+        .flat_map(|p| {
+            if p.y > 0.25 * scale {
+                [0.0, 1.0]
+            } else {
+                [1.0, 0.0]
+            }
+        })
         .collect();
     let camera = Camera::look_at(
         "front",
         64,
         64,
         0.9,
-        Vec3::new(0.0, 0.5, 2.0),
-        Vec3::new(0.0, 0.5, 0.0),
+        Vec3::new(0.0, 0.5, 2.0) * scale,
+        Vec3::new(0.0, 0.5, 0.0) * scale,
         Vec3::Y,
     );
     let frames = (0..frames)
@@ -233,6 +242,70 @@ fn static_baseline_moves_towards_the_silhouettes() {
             .sum::<f32>()
     };
     assert!(err(&w) < err(&init), "{} vs {}", err(&w), err(&init));
+}
+
+/// A character modelled in centimetres trains like the same character in metres: every loss
+/// term is measured in pixels or relative to the template's size. With the Laplacian in squared
+/// file units it weighed 10⁴ times more at scale 100 and held the weights where they started.
+#[test]
+fn training_does_not_depend_on_the_unit_of_length() {
+    const LAPLACIAN: f64 = 1e10;
+    let train = |scale: f32, is_static: bool| {
+        let (data, _) = scene_scaled(5, scale);
+        let cfg = TrainConfig {
+            iterations: 12,
+            batch: 2,
+            lr_warmup: 0,
+            adam: crate::optim::AdamConfig {
+                lr: 1e-2,
+                ..Default::default()
+            },
+            // Strong enough to matter on this coarse tube, whose Laplacian is small.
+            weights: LossWeights {
+                laplacian: LAPLACIAN,
+                ..Default::default()
+            },
+            ..config()
+        };
+        let mut t = Trainer::new(data, cfg, is_static).unwrap();
+        for _ in 0..2 {
+            t.warm_step().unwrap();
+        }
+        let records: Vec<LossRecord> = (0..12).map(|_| t.step().unwrap()).collect();
+        let w = if is_static {
+            t.static_weights().unwrap().unwrap()
+        } else {
+            outputs(&t)
+        };
+        (records, w)
+    };
+    for is_static in [true, false] {
+        let (metres, w_m) = train(1.0, is_static);
+        let (centimetres, w_cm) = train(100.0, is_static);
+        // The Laplacian takes part: it is not negligible against the silhouettes.
+        let lap = metres.iter().map(|r| r.laplacian).sum::<f64>() * LAPLACIAN;
+        let sil = metres.iter().map(|r| r.silhouette_boundary).sum::<f64>();
+        assert!(lap > 0.1 * sil, "Laplacian {lap} against silhouettes {sil}");
+        for (a, b) in metres.iter().zip(&centimetres) {
+            assert!(
+                (a.laplacian - b.laplacian).abs() <= 2e-2 * a.laplacian.abs().max(1e-12),
+                "static {is_static}, iteration {}: Laplacian {} (m) vs {} (cm)",
+                a.iteration,
+                a.laplacian,
+                b.laplacian
+            );
+            assert!(
+                (a.total - b.total).abs() <= 1e-3 * a.total.abs(),
+                "{a:?} vs {b:?}"
+            );
+        }
+        let diff = w_m
+            .iter()
+            .zip(&w_cm)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(diff < 1e-2, "static {is_static}: weights differ by {diff}");
+    }
 }
 
 #[test]
@@ -499,6 +572,26 @@ fn the_warm_start_stops_once_converged_and_reports_hitting_its_cap() {
     let hard = run(0.0, 7);
     assert!(!hard.converged && hard.iterations == 7, "{hard:?}");
     assert!(hard.kl > 0.0 && hard.position_relative > 0.0);
+}
+
+#[test]
+fn the_warm_start_learning_rate_halves_on_its_schedule() {
+    let (data, _) = scene(1);
+    let cfg = TrainConfig {
+        warm_start_lr_halving: 100,
+        ..config()
+    };
+    let lr = cfg.adam.lr;
+    let t = Trainer::new(data.clone(), cfg.clone(), false).unwrap();
+    for (done, expected) in [(0, lr), (99, lr), (100, lr / 2.0), (250, lr / 4.0)] {
+        assert_eq!(t.warm_lr(done), expected, "iteration {done}");
+    }
+    let constant = TrainConfig {
+        warm_start_lr_halving: 0,
+        ..cfg
+    };
+    let t = Trainer::new(data, constant, false).unwrap();
+    assert_eq!(t.warm_lr(10_000), lr);
 }
 
 #[test]
