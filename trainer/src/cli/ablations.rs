@@ -177,10 +177,8 @@ pub fn run(
         if cameras == 0 {
             // Stage 1 as the plain demo exports it (the best-validated average), so the
             // table also holds the demo's SkinNet row of this seed.
-            stage1.adopt_average()?;
-            let path = stage1_dir.join("model.skf");
-            stage1.skf_model()?.write(&path)?;
-            rows.push((eval(&Skinning::Skf(path), STAGE1_METHOD)?, stage1_s));
+            let row = export_best_and_score(&mut stage1, &stage1_dir, capture, STAGE1_METHOD)?;
+            rows.push((row, stage1_s));
         }
         drop(stage1);
         let list: Vec<&Variant> = if cameras == 0 {
@@ -280,6 +278,20 @@ fn eval_row(capture: &Capture, skinning: &Skinning, name: &str) -> anyhow::Resul
     Ok(row)
 }
 
+/// Adopts `trainer`'s best-validated parameter average, writes it as `dir/model.skf` (without
+/// appearance nets) and scores it as the row `name`.
+fn export_best_and_score(
+    trainer: &mut Trainer,
+    dir: &Path,
+    capture: &Capture,
+    name: &str,
+) -> anyhow::Result<EvalRow> {
+    trainer.adopt_average()?;
+    let path = dir.join("model.skf");
+    trainer.skf_model()?.write(&path)?;
+    eval_row(capture, &Skinning::Skf(path), name)
+}
+
 /// The "silhouettes only" row: stage 1 from the warm start with the Laplacian and the skinning
 /// regularisers off, for as many image iterations as stage 1 and stage 4 together, so the row
 /// says what the silhouette terms alone do to the weights.
@@ -306,11 +318,8 @@ fn silhouettes_only(
     let t = Instant::now();
     let mut trainer = Trainer::new(data.clone(), config, false)?;
     trainer.run(&dir, progress)?;
-    trainer.adopt_average()?;
-    let path = dir.join("model.skf");
-    trainer.skf_model()?.write(&path)?;
     let seconds = t.elapsed().as_secs_f64();
-    let row = eval_row(capture, &Skinning::Skf(path), name)?;
+    let row = export_best_and_score(&mut trainer, &dir, capture, name)?;
     println!("{name}: Chamfer {:.3} cm ({seconds:.0} s)", row.chamfer_cm);
     Ok((row, seconds))
 }

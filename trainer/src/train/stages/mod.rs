@@ -455,13 +455,12 @@ impl Trainer {
 
     fn stages_from(
         &mut self,
-        images: Vec<Vec<RgbTarget>>,
+        mut images: Vec<Vec<RgbTarget>>,
         dir: &Path,
         progress: bool,
         resume: bool,
     ) -> Result<Appearance, TrainError> {
         let config = self.config.stages;
-        let mut images = images;
         if !self.validation.is_empty()
             && images.len() == self.data.frames.len() + self.validation.len()
         {
