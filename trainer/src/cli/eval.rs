@@ -4,7 +4,8 @@
 //! capture's template (e.g. one written by `trainer resample`; SkinNet rows only).
 //! `--fast [N]` adds, after every `skf:FILE` row, the runtime's fast path at N nodes (and, per
 //! `--top-k K`, its top-k output), scored the same way, and prints their added error against
-//! the exact path (docs/experiments/fast-path.md).
+//! the exact path (docs/experiments/fast-path.md). `--worst-vertices` adds, per row, the
+//! worst vertex of every test frame and the joints that move it (method and truth).
 
 use std::path::PathBuf;
 
@@ -12,6 +13,7 @@ use anyhow::Context;
 use clap::{Args as ClapArgs, ValueEnum};
 use skinfield_formats::capture::load_capture;
 use skinfield_runtime::fast::{FastOptions, Interpolation, NodeMetric};
+use skinfield_trainer::eval::diagnostics::{worst_vertices, worst_vertices_markdown};
 use skinfield_trainer::eval::fast::{FastEval, TopKFormat, VsExact, evaluate_fast};
 use skinfield_trainer::eval::{
     DEFAULT_SAMPLES, EvalOptions, EvalRow, Skinning, evaluate_template, load_template,
@@ -92,6 +94,10 @@ pub struct Args {
     /// Weight format of the scored top-k output.
     #[arg(long, value_enum, default_value_t = TopKWeightsArg::Unorm8)]
     pub top_k_weights: TopKWeightsArg,
+    /// After the table, each row's worst vertex on every test frame and the joints moving it
+    /// (the method's and the ground truth's weights, at most 4 each). Capture template only.
+    #[arg(long, conflicts_with_all = ["json", "template"])]
+    pub worst_vertices: bool,
 }
 
 impl Args {
@@ -174,6 +180,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 println!(
                     "{:<32} {:>9.5} {:>9.4} {:>9.5}   (N = {}, bind {:.0} ms)",
                     e.method, e.mean_cm, e.max_cm, e.weights_l1, e.nodes, e.bind_ms
+                );
+            }
+        }
+        if args.worst_vertices {
+            for skinning in &args.weights {
+                let worst = worst_vertices(&capture, skinning)
+                    .with_context(|| format!("worst vertices of `{}`", skinning.method_name()))?;
+                println!(
+                    "\n{}",
+                    worst_vertices_markdown(&capture, skinning.method_name(), &worst, 4)
                 );
             }
         }

@@ -8,6 +8,9 @@
 //!   meshes against the training masks, next to each method's. The truth should score lowest;
 //!   a method scoring below the truth is fitting the masks with a wrong shape, and a truth
 //!   scoring far from zero says the masks, cameras or the loss itself are off.
+//! - **the worst vertex of each test frame** (`trainer eval --worst-vertices`): which vertex
+//!   is furthest from its ground-truth position, how far, and which joints move it under the
+//!   method and under the ground truth's own weights: a spike names the far joint it follows.
 
 use std::fmt::Write as _;
 
@@ -88,6 +91,114 @@ pub fn part_errors(capture: &Capture, skinning: &Skinning) -> Result<Vec<PartErr
             worst_cm: worst[k],
         })
         .collect())
+}
+
+/// The vertex of one test frame furthest from its ground-truth position.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WorstVertex {
+    /// The test frame.
+    pub frame: usize,
+    /// The template vertex.
+    pub vertex: usize,
+    /// Its distance to the same vertex of the ground truth (model units × 100: cm for files
+    /// in metres).
+    pub distance_cm: f64,
+    /// The method's influences on that vertex and frame (joint, weight), largest first; empty
+    /// where the method has no per-vertex weights (`bound-pose`).
+    pub influences: Vec<(u32, f32)>,
+    /// The ground truth's own (static) weights on that vertex, largest first; empty where the
+    /// capture has none.
+    pub true_influences: Vec<(u32, f32)>,
+}
+
+/// The worst vertex of every test frame under `skinning` (vertex-to-vertex distance, as in the
+/// zoo's worst-vertex check).
+pub fn worst_vertices(
+    capture: &Capture,
+    skinning: &Skinning,
+) -> Result<Vec<WorstVertex>, EvalError> {
+    let prepared = PreparedSkinning::new(capture, skinning)?;
+    let truth_weights = capture.evaluation_true_weights()?;
+    let mut out = Vec::with_capacity(capture.test_frames.len());
+    for &f in &capture.test_frames {
+        let posed = prepared.pose_frame(capture, f)?;
+        let truth = capture.evaluation_gt_mesh(f)?;
+        let Some((vertex, distance)) = posed
+            .iter()
+            .zip(&truth)
+            .map(|(a, b)| (*a - *b).length())
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+        else {
+            continue;
+        };
+        let mut true_influences: Vec<(u32, f32)> = match &truth_weights {
+            Some(skin) if vertex < skin.vertex_count() => {
+                let (j, w) = skin.influences(vertex);
+                j.iter().copied().zip(w.iter().copied()).collect()
+            }
+            _ => Vec::new(),
+        };
+        true_influences.retain(|&(_, w)| w > 0.0);
+        true_influences.sort_by(|a, b| b.1.total_cmp(&a.1));
+        out.push(WorstVertex {
+            frame: f,
+            vertex,
+            distance_cm: 100.0 * f64::from(distance),
+            influences: prepared
+                .vertex_influences(capture, f, vertex)?
+                .unwrap_or_default(),
+            true_influences,
+        });
+    }
+    Ok(out)
+}
+
+/// `worst` as Markdown: one line per frame, joints by name with their weights (at most
+/// `max_joints` each).
+#[must_use]
+pub fn worst_vertices_markdown(
+    capture: &Capture,
+    method: &str,
+    worst: &[WorstVertex],
+    max_joints: usize,
+) -> String {
+    let names = |inf: &[(u32, f32)]| -> String {
+        if inf.is_empty() {
+            return "–".into();
+        }
+        inf.iter()
+            .take(max_joints)
+            .map(|&(j, w)| {
+                let name = capture
+                    .skeleton
+                    .names()
+                    .get(j as usize)
+                    .map_or("?", String::as_str);
+                format!("{name} {w:.2}")
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let mut s = String::new();
+    let _ = writeln!(s, "### Worst vertex per test frame: {method}\n");
+    let _ = writeln!(
+        s,
+        "| frame | vertex | distance (cm) | joints (method) | joints (truth) |"
+    );
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- |");
+    for w in worst {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.3} | {} | {} |",
+            w.frame,
+            w.vertex,
+            w.distance_cm,
+            names(&w.influences),
+            names(&w.true_influences)
+        );
+    }
+    s
 }
 
 /// The image terms of the ground truth and of each method (row name, score) on every
@@ -233,6 +344,49 @@ mod tests {
         for (o, i) in oracle.iter().zip(&parts) {
             assert!(o.mean_cm < i.mean_cm, "{o:?} vs {i:?}");
         }
+    }
+
+    #[test]
+    fn worst_vertices_are_the_frames_largest_distances_with_their_joints() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        let worst = worst_vertices(&capture, &Skinning::Initial).unwrap();
+        assert_eq!(worst.len(), capture.test_frames.len());
+        let prepared = PreparedSkinning::new(&capture, &Skinning::Initial).unwrap();
+        let heat = crate::heat::bone_heat(
+            &capture.template,
+            &capture.skeleton,
+            &crate::heat::HeatOptions::default(),
+        )
+        .unwrap()
+        .skin;
+        for (w, &f) in worst.iter().zip(&capture.test_frames) {
+            assert_eq!(w.frame, f);
+            let posed = prepared.pose_frame(&capture, f).unwrap();
+            let truth = capture.evaluation_gt_mesh(f).unwrap();
+            let max = crate::eval::max_vertex_distance(&posed, &truth).unwrap();
+            assert!((w.distance_cm - 100.0 * max).abs() < 1e-9, "{w:?} vs {max}");
+            // The reported influences are bone heat's at that vertex, largest first.
+            let (j, wt) = heat.influences(w.vertex);
+            let total: f32 = w.influences.iter().map(|i| i.1).sum();
+            assert!((total - 1.0).abs() < 1e-4, "{w:?}");
+            assert!(w.influences.windows(2).all(|p| p[0].1 >= p[1].1));
+            for &(joint, weight) in &w.influences {
+                let k = j.iter().position(|&x| x == joint).unwrap();
+                assert_eq!(wt[k], weight);
+            }
+            assert!(!w.true_influences.is_empty());
+        }
+        // Under the oracle the method's joints are the truth's.
+        for w in worst_vertices(&capture, &Skinning::Oracle).unwrap() {
+            assert_eq!(w.influences, w.true_influences);
+        }
+        let md = worst_vertices_markdown(&capture, "initial", &worst, 2);
+        assert_eq!(
+            md.lines().filter(|l| l.starts_with("| ")).count(),
+            worst.len() + 2
+        );
     }
 
     #[test]

@@ -364,6 +364,42 @@ impl PreparedSkinning {
         self.method
     }
 
+    /// The influences (joint, weight) of the template's vertex `vertex` on `frame`, largest
+    /// first, zero weights left out; `None` for `bound-pose` (whose weights are fitted per frame
+    /// to the truth) and for a vertex or frame out of range.
+    pub fn vertex_influences(
+        &self,
+        capture: &Capture,
+        frame: usize,
+        vertex: usize,
+    ) -> Result<Option<Vec<(u32, f32)>>, EvalError> {
+        let mut influences: Vec<(u32, f32)> = match &self.weights {
+            Weights::Static { skin, .. } if vertex < skin.vertex_count() => {
+                let (j, w) = skin.influences(vertex);
+                j.iter().copied().zip(w.iter().copied()).collect()
+            }
+            Weights::Net { model, path } => {
+                let (Some(pose), Some(&p)) = (
+                    capture.poses.get(frame),
+                    capture.template.positions.get(vertex),
+                ) else {
+                    return Ok(None);
+                };
+                let skin =
+                    posing::skinnet_weights(model, &[p], pose).map_err(|e| EvalError::Skf {
+                        path: path.clone(),
+                        reason: format!("frame {frame}: {e}"),
+                    })?;
+                let (j, w) = skin.influences(0);
+                j.iter().copied().zip(w.iter().copied()).collect()
+            }
+            _ => return Ok(None),
+        };
+        influences.retain(|&(_, w)| w > 0.0);
+        influences.sort_by(|a, b| b.1.total_cmp(&a.1));
+        Ok(Some(influences))
+    }
+
     /// The template's positions posed for `frame`.
     pub fn pose_frame(&self, capture: &Capture, frame: usize) -> Result<Vec<Vec3>, EvalError> {
         self.pose_rest(capture, &capture.template.positions, frame)

@@ -819,6 +819,28 @@ fn candidate_joints_make_far_joint_spikes_impossible() {
     );
 }
 
+#[test]
+fn the_warm_start_converges_for_20_and_70_joints_alike() {
+    for joints in [20usize, 70] {
+        let data = finger_scene(joints, 4);
+        let cfg = TrainConfig {
+            iterations: 0,
+            validation_frames: 0,
+            checkpoint_every: 0,
+            ..TrainConfig::default()
+        };
+        let mut t = Trainer::new(data, cfg.clone(), false).unwrap();
+        t.run(&tempfile::tempdir().unwrap().path().join("w"), false)
+            .unwrap();
+        let s = t.warm_status();
+        eprintln!("{joints} joints: {s:?}");
+        assert!(
+            s.converged && s.iterations < cfg.warm_start_iterations,
+            "{joints} joints: {s:?}"
+        );
+    }
+}
+
 /// The tube scene with `frames` frames whose training views (not the held-out ones) show the
 /// tube bent by `train_truth` weights instead of the truth: "trained with wrong silhouettes".
 fn scene_with_training_silhouettes_of(frames: usize, train_truth: &[f32]) -> TrainData {
