@@ -4,12 +4,14 @@
 //! (`formats/tests/gltf_reference`, written on the gltf crate alone): the capture's template,
 //! posed by linear blend skinning with the capture's own skeleton and true weights, must land
 //! on the glTF world positions of every vertex (skinned hands: joint world × inverse bind;
-//! rigid parts: the mesh node's world matrix) at the capture's frame times.
+//! rigid parts: the mesh node's world matrix) at the capture's frame times. And bone heat on
+//! that template puts the robot's small head details on the head, as the asset does.
 
 use glam::{DVec3, Mat4, Vec3};
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::shared_data::shared_data_dir;
 use skinfield_trainer::eval::{EvalOptions, Skinning, evaluate};
+use skinfield_trainer::heat::{HeatOptions, bone_heat};
 use skinfield_trainer::synth::{GltfSource, SynthConfig, synthesize_gltf};
 
 #[path = "../../formats/tests/gltf_reference/mod.rs"]
@@ -36,26 +38,38 @@ fn reference_positions(r: &Reference, worlds: &[glam::DMat4]) -> Vec<DVec3> {
     out
 }
 
-#[test]
-fn robot_expressive_capture_agrees_with_gltf_skinning_everywhere() {
-    let Some(dir) = shared_data_dir() else { return };
-    let asset = dir.join("threejs-robotexpressive/RobotExpressive.glb");
+/// A capture of the robot (training clip `Walking`, test clip `Wave`) with `cameras` cameras of
+/// `side`² pixels and `frames` frames per clip, in a temporary folder.
+fn synthesize_robot(
+    asset: &std::path::Path,
+    cameras: usize,
+    side: u32,
+    frames: usize,
+) -> tempfile::TempDir {
     let tmp = tempfile::tempdir().unwrap();
     let source = GltfSource {
-        character: asset.clone(),
+        character: asset.to_path_buf(),
         motion: None,
         train_clips: vec!["Walking".into()],
         test_clips: vec!["Wave".into()],
     };
     let config = SynthConfig {
-        cameras: 4,
-        width: 48,
-        height: 48,
-        train_frames_per_clip: 2,
-        test_frames_per_clip: 2,
+        cameras,
+        width: side,
+        height: side,
+        train_frames_per_clip: frames,
+        test_frames_per_clip: frames,
         ..SynthConfig::tiny()
     };
     synthesize_gltf(tmp.path(), &config, &source).unwrap();
+    tmp
+}
+
+#[test]
+fn robot_expressive_capture_agrees_with_gltf_skinning_everywhere() {
+    let Some(dir) = shared_data_dir() else { return };
+    let asset = dir.join("threejs-robotexpressive/RobotExpressive.glb");
+    let tmp = synthesize_robot(&asset, 4, 48, 2);
     let cap = load_capture(tmp.path()).unwrap();
     assert_eq!(cap.template.vertex_count(), 7214, "every mesh of the robot");
     assert_eq!(cap.skeleton.len(), 43);
@@ -145,4 +159,74 @@ fn robot_expressive_capture_agrees_with_gltf_skinning_everywhere() {
         "oracle Chamfer {} % of the size",
         oracle.chamfer_pct
     );
+}
+
+/// The joint with the largest weight on vertex `v` (ties: the lower index).
+fn dominant(skin: &skinfield_formats::StaticSkin, v: usize) -> u32 {
+    let (j, w) = skin.influences(v);
+    let mut best = (0u32, f32::NEG_INFINITY);
+    for (&j, &w) in j.iter().zip(w) {
+        if w > best.1 || (w == best.1 && j < best.0) {
+            best = (j, w);
+        }
+    }
+    best.0
+}
+
+#[test]
+fn robot_head_details_take_the_heads_weights_in_bone_heat() {
+    let Some(dir) = shared_data_dir() else { return };
+    let tmp = synthesize_robot(
+        &dir.join("threejs-robotexpressive/RobotExpressive.glb"),
+        1,
+        16,
+        1,
+    );
+    let cap = load_capture(tmp.path()).unwrap();
+    let truth = cap.evaluation_true_weights().unwrap().unwrap();
+    let heat = |fraction: f64| {
+        let options = HeatOptions {
+            small_piece_fraction: fraction,
+            ..HeatOptions::default()
+        };
+        bone_heat(&cap.template, &cap.skeleton, &options).unwrap()
+    };
+    let (with, without) = (heat(HeatOptions::default().small_piece_fraction), heat(0.0));
+    assert_eq!(without.stats.inherited_vertices, 0);
+    assert!(with.stats.inherited_vertices > 0, "{:?}", with.stats);
+    // The vertices whose weights the rule changed: the asset's own weights are the reference.
+    let n = cap.template.vertex_count();
+    let changed: Vec<usize> = (0..n)
+        .filter(|&v| with.skin.influences(v) != without.skin.influences(v))
+        .collect();
+    let agree = |skin: &skinfield_formats::StaticSkin| {
+        changed
+            .iter()
+            .filter(|&&v| dominant(skin, v) == dominant(&truth, v))
+            .count()
+    };
+    let (on, off) = (agree(&with.skin), agree(&without.skin));
+    eprintln!(
+        "{} welded vertices inherited, {} file vertices changed: dominant joint as the asset's \
+         on {on} with the rule, {off} without",
+        with.stats.inherited_vertices,
+        changed.len()
+    );
+    assert!(on > off, "{on} vs {off} of {}", changed.len());
+    // The head details that were every test frame's worst vertex in the zoo now follow `Head`.
+    let head = cap
+        .skeleton
+        .names()
+        .iter()
+        .position(|s| s == "Head")
+        .unwrap() as u32;
+    let head_details: Vec<usize> = changed
+        .iter()
+        .copied()
+        .filter(|&v| dominant(&truth, v) == head)
+        .collect();
+    assert!(!head_details.is_empty());
+    for v in head_details {
+        assert_eq!(dominant(&with.skin, v), head, "vertex {v}");
+    }
 }

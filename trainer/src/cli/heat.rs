@@ -62,7 +62,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let st = &result.stats;
     println!(
-        "{}: {} vertices ({} welded), {} joints, {} segments, {} components ({} fallback), {} fallback vertices; {:.3} s (setup {:.3}, visibility {:.3}, factor {:.3}, solve {:.3})",
+        "{}: {} vertices ({} welded), {} joints, {} segments, {} components ({} fallback), {} fallback vertices, {} small-piece vertices; {:.3} s (setup {:.3}, visibility {:.3}, factor {:.3}, solve {:.3})",
         args.asset.display(),
         st.vertices,
         st.welded_vertices,
@@ -71,6 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         st.components,
         st.fallback_components,
         st.fallback_vertices,
+        st.inherited_vertices,
         st.total_s,
         st.setup_s,
         st.attach_s,

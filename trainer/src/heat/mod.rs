@@ -24,6 +24,9 @@
 //!   where no vertex sees any bone is solved with visibility ignored (heat from the nearest
 //!   segments by distance) and counted as a fallback; a vertex in no usable triangle, or whose
 //!   solved weights are all zero, takes its nearest segment(s) by distance;
+//! - a small separate piece (a component under `small_piece_fraction` of the mesh's size:
+//!   eyebrows, bolts, buttons) takes the solved weights of the nearest vertex of a larger
+//!   component, the surface it sits on (module `pieces`);
 //! - should the factorisation still fail (it cannot for the SPD system above, barring floating
 //!   point), it is retried with negative cotangent weights clamped to zero, which makes the
 //!   matrix diagonally dominant, and that is reported in the stats.
@@ -34,6 +37,7 @@
 mod attach;
 mod bones;
 mod laplacian;
+mod pieces;
 mod solve;
 pub(crate) mod weld;
 
@@ -63,6 +67,11 @@ pub struct HeatOptions {
     /// Explicit bind-pose tail of every joint (world space, joint order), e.g. from MakeHuman or
     /// Blender bones: each joint then owns exactly the segment head → tail.
     pub bone_tails: Option<Vec<Vec3>>,
+    /// Components whose bounding-box diagonal is below this fraction of the mesh's take the
+    /// weights of the nearest vertex of a larger component (0: off). 0.02 keeps the zoo robot's
+    /// limbs (5 % of its size and more) and every skirt and cape apart, and moves its 1–2 %
+    /// head details onto the head, where its asset has them.
+    pub small_piece_fraction: f64,
 }
 
 impl Default for HeatOptions {
@@ -75,6 +84,7 @@ impl Default for HeatOptions {
             weld_tolerance: 1e-6,
             leaf_fraction: 0.5,
             bone_tails: None,
+            small_piece_fraction: 0.02,
         }
     }
 }
@@ -101,6 +111,8 @@ pub struct HeatStats {
     /// Welded vertices given their nearest segment(s) directly (no usable triangle, or all
     /// solved weights zero).
     pub fallback_vertices: usize,
+    /// Welded vertices of small pieces that took the weights of a larger component.
+    pub inherited_vertices: usize,
     /// Welded vertices in solved components that saw no bone (`H_ii = 0`: heat only by diffusion).
     pub unattached_vertices: usize,
     /// Largest `|Σ_j w_ij − 1|` over solved vertices before clamping: the raw heat weights are a
@@ -388,6 +400,13 @@ pub fn bone_heat(
         *row = a.joints.iter().map(|&(j, s)| (j, s as f32)).collect();
     }
     stats.fallback_vertices = fallback;
+    stats.inherited_vertices = pieces::inherit_small_pieces(
+        &welded.positions,
+        &component,
+        n_components,
+        &mut rows,
+        options.small_piece_fraction,
+    );
 
     for row in &mut rows {
         normalise_and_prune(row, options.min_weight);
@@ -432,6 +451,10 @@ fn check_options(o: &HeatOptions) -> Result<(), HeatError> {
     ok(
         o.leaf_fraction.is_finite() && o.leaf_fraction >= 0.0,
         "leaf_fraction",
+    )?;
+    ok(
+        o.small_piece_fraction.is_finite() && (0.0..1.0).contains(&o.small_piece_fraction),
+        "small_piece_fraction",
     )
 }
 

@@ -174,6 +174,9 @@ pub struct TrainConfig {
     /// [`Self::full_resolution_queries`] existed, demo schedule: L = 4 scored 1.030 cm Chamfer
     /// on the novel test poses against 1.166 cm for L = 6, since lower frequencies vary less
     /// between training vertices; the queries fix that at L = 6 (0.953 cm), so the default stays.
+    /// L = 8 (finer than the 1–3 cm finger bones of the zoo's robot and Witch) let the robot's
+    /// warm start converge in 1,138 iterations instead of 1,843 but its SkinNet scored 1.497 cm
+    /// instead of 1.257 (docs/experiments/fidelity.md).
     pub pe_frequencies: u32,
     /// Store the training poses' feature range in the exported `.skf` (`PRNG`), so the runtime
     /// clamps the pose features of any pose into it ([`skinfield_formats::skf::pose_range`]).
