@@ -357,3 +357,66 @@ fn bad_input_is_an_error() {
         .is_err()
     );
 }
+
+#[test]
+fn a_component_that_sees_only_far_bones_is_weighted_by_distance() {
+    // A limb (bones a0, a1 inside a cylinder) and, 0.3 in front of its bone, a 0.4 × 0.4 plate
+    // facing the limb (normal −z): the limb's bone is behind the plate's normals and behind the
+    // cylinder wall, so the only bone the plate sees is chain b, 1.2 further in front (the
+    // robot's face plate and its IK pole targets).
+    let mut mesh = cylinder(Vec3::ZERO);
+    let first = mesh.positions.len();
+    for y in [0.8f32, 1.0, 1.2] {
+        for x in [-0.2f32, 0.0, 0.2] {
+            mesh.positions.push(Vec3::new(x, y, 0.3));
+        }
+    }
+    let p = |row: usize, col: usize| (first + 3 * row + col) as u32;
+    for row in 0..2 {
+        for col in 0..2 {
+            // Clockwise seen from +z: the normal points to −z, towards the limb.
+            let (a, b, c, d) = (
+                p(row, col),
+                p(row, col + 1),
+                p(row + 1, col + 1),
+                p(row + 1, col),
+            );
+            mesh.triangles.push([a, c, b]);
+            mesh.triangles.push([a, d, c]);
+        }
+    }
+    mesh.compute_normals();
+    let skel = skeleton(vec![
+        two_bones(Vec3::ZERO, ["a0", "a1"]),
+        two_bones(Vec3::new(0.0, 0.0, 1.5), ["b0", "b1"]),
+    ]);
+    let share = |r: &skinfield_trainer::heat::HeatResult, joints: [u32; 2]| {
+        (first..mesh.vertex_count())
+            .map(|v| weight(&r.skin, v, joints[0]) + weight(&r.skin, v, joints[1]))
+            .fold(f32::INFINITY, f32::min)
+    };
+    let by_distance = bone_heat(&mesh, &skel, &options()).unwrap();
+    assert_valid(&by_distance.skin, mesh.vertex_count());
+    assert_eq!(by_distance.stats.fallback_components, 1);
+    assert!(
+        share(&by_distance, [0, 1]) > 0.99,
+        "{:?}",
+        by_distance.stats
+    );
+    // With far visible bones accepted (Pinocchio's rule alone) the plate follows chain b.
+    let visible = bone_heat(
+        &mesh,
+        &skel,
+        &HeatOptions {
+            far_visible_ratio: 10.0,
+            ..options()
+        },
+    )
+    .unwrap();
+    assert_eq!(visible.stats.fallback_components, 0);
+    assert!(share(&visible, [2, 3]) > 0.99);
+    // The limb is solved with visibility either way, and alike.
+    for v in 0..first {
+        assert_eq!(by_distance.skin.influences(v), visible.skin.influences(v));
+    }
+}

@@ -184,14 +184,17 @@ fn robot_head_details_take_the_heads_weights_in_bone_heat() {
     );
     let cap = load_capture(tmp.path()).unwrap();
     let truth = cap.evaluation_true_weights().unwrap().unwrap();
-    let heat = |fraction: f64| {
+    let heat = |fraction: f64, far: f64| {
         let options = HeatOptions {
             small_piece_fraction: fraction,
+            far_visible_ratio: far,
             ..HeatOptions::default()
         };
         bone_heat(&cap.template, &cap.skeleton, &options).unwrap()
     };
-    let (with, without) = (heat(HeatOptions::default().small_piece_fraction), heat(0.0));
+    let defaults = HeatOptions::default();
+    let with = heat(defaults.small_piece_fraction, defaults.far_visible_ratio);
+    let without = heat(0.0, defaults.far_visible_ratio);
     assert_eq!(without.stats.inherited_vertices, 0);
     assert!(with.stats.inherited_vertices > 0, "{:?}", with.stats);
     // The vertices whose weights the rule changed: the asset's own weights are the reference.
@@ -229,4 +232,32 @@ fn robot_head_details_take_the_heads_weights_in_bone_heat() {
     for v in head_details {
         assert_eq!(dominant(&with.skin, v), head, "vertex {v}");
     }
+    // The face plate sees only the IK pole targets; with Pinocchio's visibility alone (far
+    // visible bones accepted) it follows them, by distance it follows the head.
+    let pinocchio = heat(defaults.small_piece_fraction, f64::MAX);
+    let pole = |name: &str| cap.skeleton.names().iter().position(|s| s == name).unwrap() as u32;
+    let poles = [pole("PoleTarget.L"), pole("PoleTarget.R")];
+    let plate: Vec<usize> = (0..n)
+        .filter(|&v| poles.contains(&dominant(&pinocchio.skin, v)) && dominant(&truth, v) == head)
+        .collect();
+    let plate_on_head = plate
+        .iter()
+        .filter(|&&v| dominant(&with.skin, v) == head)
+        .count();
+    let agree_all = |skin: &skinfield_formats::StaticSkin| {
+        (0..n)
+            .filter(|&v| dominant(skin, v) == dominant(&truth, v))
+            .count()
+    };
+    eprintln!(
+        "{} head vertices on the pole targets without the far-bone rule, {plate_on_head} on \
+         the head with it; dominant joint as the asset's on {} of {n} vertices with it, {} \
+         without",
+        plate.len(),
+        agree_all(&with.skin),
+        agree_all(&pinocchio.skin)
+    );
+    assert!(!plate.is_empty());
+    assert_eq!(plate_on_head, plate.len());
+    assert!(agree_all(&with.skin) > agree_all(&pinocchio.skin));
 }

@@ -21,9 +21,13 @@
 //! - collapsed and duplicate triangles are dropped, degenerate (near zero-area) triangles give no
 //!   stiffness and no area, interior faces are just more triangles (and more occluders);
 //! - each connected component is solved with the heat of the bones visible from it; a component
-//!   where no vertex sees any bone is solved with visibility ignored (heat from the nearest
-//!   segments by distance) and counted as a fallback; a vertex in no usable triangle, or whose
-//!   solved weights are all zero, takes its nearest segment(s) by distance;
+//!   where no vertex sees any bone, or none sees a bone within `far_visible_ratio` (1.5) times
+//!   its distance to the nearest bone, is solved with visibility ignored (heat from the nearest
+//!   segments by distance) and counted as a fallback. The second case is a shell in front of
+//!   the body whose normals face away from its own bone: the zoo robot's face plate saw only the
+//!   IK pole targets, about twice as far as its head's bone, and followed them;
+//! - a vertex in no usable triangle, or whose solved weights are all zero, takes its nearest
+//!   segment(s) by distance;
 //! - a small separate piece (a component under `small_piece_fraction` of the mesh's size:
 //!   eyebrows, bolts, buttons) takes the solved weights of the nearest vertex of a larger
 //!   component, the surface it sits on (module `pieces`);
@@ -67,6 +71,10 @@ pub struct HeatOptions {
     /// Explicit bind-pose tail of every joint (world space, joint order), e.g. from MakeHuman or
     /// Blender bones: each joint then owns exactly the segment head → tail.
     pub bone_tails: Option<Vec<Vec3>>,
+    /// A component solved with visibility must have a vertex whose nearest visible bone is at
+    /// most this many times further than its nearest bone; otherwise it is solved by distance
+    /// alone, like a component that sees no bone (see the module docs).
+    pub far_visible_ratio: f64,
     /// Components whose bounding-box diagonal is below this fraction of the mesh's take the
     /// weights of the nearest vertex of a larger component (0: off). 0.02 keeps the zoo robot's
     /// limbs (5 % of its size and more) and every skirt and cape apart, and moves its 1–2 %
@@ -85,6 +93,7 @@ impl Default for HeatOptions {
             leaf_fraction: 0.5,
             bone_tails: None,
             small_piece_fraction: 0.02,
+            far_visible_ratio: 1.5,
         }
     }
 }
@@ -106,7 +115,8 @@ pub struct HeatStats {
     pub segments: usize,
     /// Connected components (of usable triangles).
     pub components: usize,
-    /// Components that saw no bone and were solved with visibility ignored.
+    /// Components that saw no bone, or only bones further than `far_visible_ratio` times their
+    /// nearest one, and were solved with visibility ignored.
     pub fallback_components: usize,
     /// Welded vertices given their nearest segment(s) directly (no usable triangle, or all
     /// solved weights zero).
@@ -256,34 +266,32 @@ pub fn bone_heat(
         &bvh,
         params,
     );
-    // Components where nobody sees a bone: redo them by distance alone.
+    // Components where nobody sees a bone, or sees only bones much further than the nearest
+    // one: redo them by distance alone.
+    let nearest = attach::attach(
+        &welded.positions,
+        &normals,
+        &in_mesh,
+        &segments,
+        &bvh,
+        AttachParams {
+            ignore_visibility: true,
+            ..params
+        },
+    );
     let mut sees = vec![false; n_components];
-    for (a, &c) in attachment.iter().zip(&component) {
-        if c != u32::MAX && !a.joints.is_empty() {
+    for ((a, near), &c) in attachment.iter().zip(&nearest).zip(&component) {
+        if c != u32::MAX
+            && !a.joints.is_empty()
+            && a.distance <= options.far_visible_ratio * near.distance
+        {
             sees[c as usize] = true;
         }
     }
     stats.fallback_components = sees.iter().filter(|s| !**s).count();
-    if stats.fallback_components > 0 {
-        let blind: Vec<bool> = component
-            .iter()
-            .map(|&c| c != u32::MAX && !sees[c as usize])
-            .collect();
-        let redo = attach::attach(
-            &welded.positions,
-            &normals,
-            &blind,
-            &segments,
-            &bvh,
-            AttachParams {
-                ignore_visibility: true,
-                ..params
-            },
-        );
-        for (v, a) in redo.into_iter().enumerate() {
-            if blind[v] {
-                attachment[v] = a;
-            }
+    for ((a, near), &c) in attachment.iter_mut().zip(nearest).zip(&component) {
+        if c != u32::MAX && !sees[c as usize] {
+            *a = near;
         }
     }
     stats.unattached_vertices = attachment
@@ -451,6 +459,10 @@ fn check_options(o: &HeatOptions) -> Result<(), HeatError> {
     ok(
         o.leaf_fraction.is_finite() && o.leaf_fraction >= 0.0,
         "leaf_fraction",
+    )?;
+    ok(
+        o.far_visible_ratio.is_finite() && o.far_visible_ratio >= 1.0,
+        "far_visible_ratio",
     )?;
     ok(
         o.small_piece_fraction.is_finite() && (0.0..1.0).contains(&o.small_piece_fraction),
