@@ -18,7 +18,7 @@ use glam::Vec3;
 use skinfield_formats::PartLabel;
 use skinfield_formats::capture::Capture;
 
-use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s};
+use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s, sorted_influences};
 use crate::losses::silhouette::EdgeTable;
 use crate::train::data::{DataError, DataOptions, initial_weights, train_data};
 use crate::train::validation::{ValidationScore, score_posed};
@@ -132,15 +132,10 @@ pub fn worst_vertices(
         else {
             continue;
         };
-        let mut true_influences: Vec<(u32, f32)> = match &truth_weights {
-            Some(skin) if vertex < skin.vertex_count() => {
-                let (j, w) = skin.influences(vertex);
-                j.iter().copied().zip(w.iter().copied()).collect()
-            }
+        let true_influences = match &truth_weights {
+            Some(skin) if vertex < skin.vertex_count() => sorted_influences(skin, vertex),
             _ => Vec::new(),
         };
-        true_influences.retain(|&(_, w)| w > 0.0);
-        true_influences.sort_by(|a, b| b.1.total_cmp(&a.1));
         out.push(WorstVertex {
             frame: f,
             vertex,

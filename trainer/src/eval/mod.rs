@@ -373,10 +373,9 @@ impl PreparedSkinning {
         frame: usize,
         vertex: usize,
     ) -> Result<Option<Vec<(u32, f32)>>, EvalError> {
-        let mut influences: Vec<(u32, f32)> = match &self.weights {
+        Ok(Some(match &self.weights {
             Weights::Static { skin, .. } if vertex < skin.vertex_count() => {
-                let (j, w) = skin.influences(vertex);
-                j.iter().copied().zip(w.iter().copied()).collect()
+                sorted_influences(skin, vertex)
             }
             Weights::Net { model, path } => {
                 let (Some(pose), Some(&p)) = (
@@ -390,14 +389,10 @@ impl PreparedSkinning {
                         path: path.clone(),
                         reason: format!("frame {frame}: {e}"),
                     })?;
-                let (j, w) = skin.influences(0);
-                j.iter().copied().zip(w.iter().copied()).collect()
+                sorted_influences(&skin, 0)
             }
             _ => return Ok(None),
-        };
-        influences.retain(|&(_, w)| w > 0.0);
-        influences.sort_by(|a, b| b.1.total_cmp(&a.1));
-        Ok(Some(influences))
+        }))
     }
 
     /// The template's positions posed for `frame`.
@@ -451,6 +446,19 @@ impl PreparedSkinning {
             }
         }
     }
+}
+
+/// Vertex `v`'s influences in `skin` (joint, weight), largest first, zero weights left out.
+pub(crate) fn sorted_influences(skin: &StaticSkin, v: usize) -> Vec<(u32, f32)> {
+    let (joints, weights) = skin.influences(v);
+    let mut out: Vec<(u32, f32)> = joints
+        .iter()
+        .copied()
+        .zip(weights.iter().copied())
+        .filter(|&(_, w)| w > 0.0)
+        .collect();
+    out.sort_by(|a, b| b.1.total_cmp(&a.1));
+    out
 }
 
 /// Reads a `.skf` and checks that its skeleton is the capture's (same joint names, same order:

@@ -51,7 +51,7 @@ use faer::Mat;
 use glam::{DVec3, Vec3};
 use skinfield_formats::{MeshError, Skeleton, SkinError, StaticSkin, Template};
 
-use attach::{AttachParams, Attachment};
+use attach::AttachParams;
 
 /// Settings of [`bone_heat`].
 #[derive(Clone, Debug)]
@@ -266,12 +266,13 @@ pub fn bone_heat(
         &bvh,
         params,
     );
-    // Components where nobody sees a bone, or sees only bones much further than the nearest
-    // one: redo them by distance alone.
+    // The nearest segment(s) of every vertex by distance alone: the yardstick of what a vertex
+    // sees, the attachment of components that see nothing near, and the weights of vertices
+    // the solve leaves without any (below).
     let nearest = attach::attach(
         &welded.positions,
         &normals,
-        &in_mesh,
+        &vec![true; n],
         &segments,
         &bvh,
         AttachParams {
@@ -279,6 +280,8 @@ pub fn bone_heat(
             ..params
         },
     );
+    // Components where nobody sees a bone, or sees only bones much further than the nearest
+    // one: redo them by distance alone.
     let mut sees = vec![false; n_components];
     for ((a, near), &c) in attachment.iter().zip(&nearest).zip(&component) {
         if c != u32::MAX
@@ -289,9 +292,9 @@ pub fn bone_heat(
         }
     }
     stats.fallback_components = sees.iter().filter(|s| !**s).count();
-    for ((a, near), &c) in attachment.iter_mut().zip(nearest).zip(&component) {
+    for ((a, near), &c) in attachment.iter_mut().zip(&nearest).zip(&component) {
         if c != u32::MAX && !sees[c as usize] {
-            *a = near;
+            a.clone_from(near);
         }
     }
     stats.unattached_vertices = attachment
@@ -384,27 +387,13 @@ pub fn bone_heat(
     stats.raw_min = if m > 0 { raw_min } else { 0.0 };
 
     // Vertices outside any usable triangle, or with nothing left: nearest segment(s) by distance.
-    let nearest_params = AttachParams {
-        ignore_visibility: true,
-        ..params
-    };
     let mut fallback = 0;
-    for (row, p) in rows.iter_mut().zip(&welded.positions) {
+    for (row, a) in rows.iter_mut().zip(&nearest) {
         let total: f32 = row.iter().map(|r| r.1).sum();
         if total > 0.0 && total.is_finite() {
             continue;
         }
         fallback += 1;
-        let a: Attachment = attach::attach(
-            std::slice::from_ref(p),
-            &[DVec3::ZERO],
-            &[true],
-            &segments,
-            &bvh,
-            nearest_params,
-        )
-        .pop()
-        .unwrap_or_default();
         *row = a.joints.iter().map(|&(j, s)| (j, s as f32)).collect();
     }
     stats.fallback_vertices = fallback;
