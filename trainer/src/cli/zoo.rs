@@ -642,8 +642,8 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
          vertices, static baseline {} iterations; seed {}; captures of {} cameras at {}² pixels, \
          {} frames per training clip and {} per test clip. Methods: `initial` = bone heat (LBS), \
          `static` = learned pose-independent weights, `ours` = SkinNet, `oracle` = the ground \
-         truth's own weights under LBS (the ground truth is DQS + flexion bulges, and for the \
-         built-in character a skirt pushed out by the legs).\n",
+         truth's own weights under LBS (the ground truth is DQS + flexion bulges, none on the \
+         robot's rigid parts, and for the built-in character a skirt pushed out by the legs).\n",
         budget.warm_start,
         budget.iterations,
         budget.train_vertices,

@@ -83,6 +83,8 @@ pub struct GroundTruthDeformer {
     leg_capsules: Vec<(usize, usize, f32, f32)>,
     /// Scale of the bulge's amplitude and radius (1 for a 1.75 m character in metres).
     bulge_scale: f32,
+    /// Vertices of hard parts that move rigidly with their joint and never bulge (empty: none).
+    rigid: Vec<bool>,
 }
 
 /// Dual quaternion `(real, dual)` of a skinning matrix, which DQS takes as rigid: any scale
@@ -223,6 +225,7 @@ impl GroundTruthDeformer {
             bulge_joints: BULGE_JOINTS.to_vec(),
             leg_capsules: LEG_CAPSULES.to_vec(),
             bulge_scale: 1.0,
+            rigid: Vec::new(),
         }
     }
 
@@ -244,6 +247,16 @@ impl GroundTruthDeformer {
     #[must_use]
     pub fn with_bulge_scale(mut self, scale: f32) -> Self {
         self.bulge_scale = scale;
+        self
+    }
+
+    /// Marks hard vertices: `rigid[v]` for vertex `v` (vertices past the mask's end are soft).
+    /// Hard vertices never bulge. A glTF mesh node parented to a joint is a rigid part (a
+    /// robot's metal elbow ball): soft-tissue bulge on it would be a swelling no real capture
+    /// shows, and a deformation no skinning of a rigid part should have to learn.
+    #[must_use]
+    pub fn with_rigid_vertices(mut self, rigid: Vec<bool>) -> Self {
+        self.rigid = rigid;
         self
     }
 
@@ -294,7 +307,9 @@ impl GroundTruthDeformer {
             let parent = self.skeleton.parents()[j];
             let children: Vec<usize> = self.skeleton.children(j).collect();
             for (v, pos) in p.iter_mut().enumerate() {
-                if matches!(self.parts[v], Part::Skirt | Part::Sleeve) {
+                if matches!(self.parts[v], Part::Skirt | Part::Sleeve)
+                    || self.rigid.get(v).copied().unwrap_or(false)
+                {
                     continue;
                 }
                 let r = (self.rest[v] - centres[j]).length() / (BULGE_RADIUS * self.bulge_scale);

@@ -6,8 +6,9 @@
 //! static part. Motion comes from named clips of the same file
 //! or of another glTF whose joints are matched by name (`--motion`). The ground-truth deformer
 //! is dual-quaternion skinning with the artist weights plus the flexion bulge at joints whose
-//! names mark an elbow or a knee ([`is_bulge_joint`]). glTF files carry no skin / clothing
-//! labels, so there is no skirt push-out for them (the built-in character has one).
+//! names mark an elbow or a knee ([`is_bulge_joint`]); rigid parts (mesh nodes that follow a
+//! joint, such as a robot's limbs) move rigidly and never bulge. glTF files carry no skin /
+//! clothing labels, so there is no skirt push-out for them (the built-in character has one).
 //! Characters without vertex colours get a procedural pattern (a colour per primitive,
 //! modulated by stripes and value noise) so the images carry gradients. The cameras frame the
 //! ground truth's bounding box over every frame ([`Framing::around`]), whatever the
@@ -24,7 +25,7 @@ use skinfield_formats::{Aabb, Pose};
 
 use super::body::Part;
 use super::deform::GroundTruthDeformer;
-use super::gltf_character::assemble;
+use super::gltf_character::{GltfCharacter, PartSource, assemble};
 use super::motion::Split;
 use super::output::{Subject, SynthSummary, write_subject};
 use super::rig::{Framing, camera_rig_framed};
@@ -222,7 +223,8 @@ pub fn synthesize_gltf(
         vec![Part::Torso; template.vertex_count()],
     )
     .with_rig(bulge, Vec::new())
-    .with_bulge_scale(height / 1.75);
+    .with_bulge_scale(height / 1.75)
+    .with_rigid_vertices(rigid_vertices(&character));
     let framed = motion_bounds(&deformer, &frames)?.unwrap_or(bounds);
     let character_seconds = start.elapsed().as_secs_f64();
     let subject = Subject {
@@ -249,11 +251,25 @@ pub fn synthesize_gltf(
             .map_or_else(String::new, |f| f.to_string_lossy().into_owned()),
         deformer_description:
             "dual-quaternion skinning with the artist weights (rigid parts: weight 1 on their \
-             joint) + flexion bulge at joints named like elbows and knees \
-             (trainer::synth::gltf_source); no skirt push-out"
+             joint) + flexion bulge at joints named like elbows and knees, except on rigid \
+             parts (trainer::synth::gltf_source); no skirt push-out"
                 .into(),
     };
     write_subject(dir, config, &subject, start, character_seconds)
+}
+
+/// One flag per template vertex: whether it belongs to a rigid part (a mesh node that follows
+/// one joint), which the ground truth moves rigidly, without the flexion bulge.
+fn rigid_vertices(character: &GltfCharacter) -> Vec<bool> {
+    let mut rigid = vec![false; character.template.vertex_count()];
+    for part in &character.parts {
+        if matches!(part.source, PartSource::Rigid { .. }) {
+            let end = (part.first_vertex + part.vertex_count).min(rigid.len());
+            let start = part.first_vertex.min(end);
+            rigid[start..end].fill(true);
+        }
+    }
+    rigid
 }
 
 /// The bounding box of the ground truth over every frame (`None` without frames).

@@ -251,6 +251,29 @@ fn bulge_and_skirt_push_out_move_the_surface_beyond_dqs() {
     }
     assert!(near_max > 0.01, "bulge at the elbow only {near_max} m");
 
+    // Vertices marked rigid (here: those within 5 cm of the elbow) do not bulge; the rest bulge
+    // as before.
+    let rigid: Vec<bool> = ch
+        .template
+        .positions
+        .iter()
+        .map(|p| (*p - elbow).length() < 0.05)
+        .collect();
+    let hard = ch.deformer.clone().with_rigid_vertices(rigid.clone());
+    let only_bulge = DeformParts {
+        bulge: true,
+        skirt: false,
+    };
+    let (hard_bulged, _) = hard.deform_with(&pose, only_bulge).unwrap();
+    for v in 0..base.len() {
+        let want = if rigid[v] { base[v] } else { bulged[v] };
+        assert!(
+            (hard_bulged[v] - want).length() < 1e-6,
+            "vertex {v} (rigid: {})",
+            rigid[v]
+        );
+    }
+
     // Left thigh kicked forward: the skirt is pushed off the leg, and ends outside every leg.
     let pose = posed(&ch, &[(joint::L_HIP, 0, -1.3)]);
     let (base, _) = ch
