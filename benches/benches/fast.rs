@@ -342,24 +342,7 @@ fn table() {
     }
 }
 
-/// `SKINFIELD_FTZ=1`: flush denormals to zero in MXCSR (experiment).
-fn maybe_ftz() {
-    #[cfg(target_arch = "x86_64")]
-    if std::env::var("SKINFIELD_FTZ").as_deref() == Ok("1") {
-        let mut csr: u32 = 0;
-        // SAFETY: reads and writes this thread's MXCSR; FTZ (bit 15) and DAZ (bit 6) only
-        // change how denormals are treated.
-        unsafe {
-            std::arch::asm!("stmxcsr [{0}]", in(reg) &mut csr);
-            csr |= (1 << 15) | (1 << 6);
-            std::arch::asm!("ldmxcsr [{0}]", in(reg) &csr);
-        }
-        eprintln!("FTZ/DAZ on (MXCSR {csr:#x})");
-    }
-}
-
 fn main() {
-    maybe_ftz();
     let mut c = Criterion::default()
         .output_directory(&criterion_dir())
         .warm_up_time(Duration::from_secs(1))

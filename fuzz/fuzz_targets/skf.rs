@@ -23,6 +23,15 @@ fn exercise(v: &SkfView<'_>) {
             let _ = (c.position(a), c.joints(a).count());
         }
     }
+    if let Some(r) = v.pose_range() {
+        for i in 0..r.len() {
+            let (low, high) = (r.low(i), r.high(i));
+            assert!(
+                low.is_finite() && high.is_finite() && low <= high,
+                "a parsed PRNG section has finite, ordered bounds"
+            );
+        }
+    }
     for net in [Net::Skin, Net::Albedo, Net::Shadow] {
         for i in 0..=v.config().hidden_widths().len() + 1 {
             let _ = v.layer(net, i);
