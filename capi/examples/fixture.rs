@@ -8,7 +8,10 @@
 //! - `frames.bin`: `u64` frame count, `u64` joint count, then per frame one `SkfTransform`
 //!   (10 f32: translation, rotation x y z w, scale) per engine joint;
 //! - `reference.bin`: per frame and vertex, the position and normal from the Rust runtime's
-//!   packed `SkinJob` (LBS on even frames, DQS on odd ones), 6 f32.
+//!   packed `SkinJob` (LBS on even frames, DQS on odd ones), 6 f32;
+//! - `triangles.bin`: `u64` triangle count, then 3 `u32` vertex indices per triangle;
+//! - `reference_fast.bin`: the same as `reference.bin` from the runtime's fast path
+//!   (`FastMesh` with the default options over those triangles, DQS keeping 4 joints).
 //!
 //! All little-endian. Usage: `fixture MODEL.skf CHARACTER.glb OUT_DIR`.
 
@@ -18,8 +21,8 @@ use std::process::ExitCode;
 use glam::{Mat4, Vec3};
 use skinfield_formats::gltf_io::load_gltf;
 use skinfield_runtime::{
-    BoundMesh, FrameState, JointMap, Method, Scratch, SkinJob, SkinNetModel, Transform,
-    read_skf_file,
+    BoundMesh, FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, JointMap, Method,
+    Scratch, SkinJob, SkinNetModel, Transform, read_skf_file,
 };
 
 const FRAMES: usize = 6;
@@ -85,6 +88,14 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         floats(&mut mesh_bytes, &v.to_array());
     }
     std::fs::write(out_dir.join("mesh.bin"), mesh_bytes)?;
+    let triangles = &skin.template.triangles;
+    let mut triangle_bytes = (triangles.len() as u64).to_le_bytes().to_vec();
+    for t in triangles {
+        for i in t {
+            triangle_bytes.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    std::fs::write(out_dir.join("triangles.bin"), triangle_bytes)?;
 
     // Frames in the engine's order, and the Rust runtime's skinning of each.
     let mesh = BoundMesh::bind(&model, &positions)?;
@@ -95,6 +106,9 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     frames.extend_from_slice(&(FRAMES as u64).to_le_bytes());
     frames.extend_from_slice(&(order.len() as u64).to_le_bytes());
     let mut reference = Vec::new();
+    let fast_mesh = FastMesh::bind(&model, &positions, triangles, &FastOptions::DEFAULT)?;
+    let mut nodes = FastFrame::new(&fast_mesh);
+    let mut reference_fast = Vec::new();
     for f in 0..FRAMES {
         let t = clip.duration_s * f as f32 / (FRAMES - 1) as f32;
         let pose = clip.sample(skin, t);
@@ -105,11 +119,12 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             floats(&mut frames, &l.scale.to_array());
         }
         frame.set_engine_pose(&model, &map, &locals)?;
+        let method = if f % 2 == 0 { Method::Lbs } else { Method::Dqs };
         SkinJob {
             model: &model,
             mesh: &mesh,
             frame: &frame,
-            method: if f % 2 == 0 { Method::Lbs } else { Method::Dqs },
+            method,
             first_vertex: 0,
             rest_normals: Some(&normals),
             rest_tangents: None,
@@ -123,9 +138,30 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             floats(&mut reference, &a.to_array());
             floats(&mut reference, &b.to_array());
         }
+        nodes.update(&model, &fast_mesh, &frame, &mut scratch)?;
+        FastSkinJob {
+            mesh: &fast_mesh,
+            frame: &frame,
+            nodes: &nodes,
+            method,
+            influences: 4,
+            first_vertex: 0,
+            rest_normals: Some(&normals),
+            rest_tangents: None,
+            out_positions: &mut p,
+            out_normals: Some(&mut nn),
+            out_tangents: None,
+            out_weights: None,
+        }
+        .run()?;
+        for (a, b) in p.iter().zip(&nn) {
+            floats(&mut reference_fast, &a.to_array());
+            floats(&mut reference_fast, &b.to_array());
+        }
     }
     std::fs::write(out_dir.join("frames.bin"), frames)?;
     std::fs::write(out_dir.join("reference.bin"), reference)?;
+    std::fs::write(out_dir.join("reference_fast.bin"), reference_fast)?;
     println!(
         "fixture: {} joints (engine order), {n} vertices, {FRAMES} frames in {}",
         order.len(),

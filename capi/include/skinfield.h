@@ -54,8 +54,20 @@ typedef enum SkfStatus {
 } SkfStatus;
 
 /*
+ A mesh bound for the fast path (opaque), with the rest normals and tangents of the mesh it
+ was bound from.
+ */
+typedef struct SkfFastMesh SkfFastMesh;
+
+/*
+ SkinNet's weights at a fast mesh's nodes for one posed frame (opaque; one per mesh per
+ frame in flight).
+ */
+typedef struct SkfFastNodes SkfFastNodes;
+
+/*
  One pose of a model (opaque). One frame per character instance; a frame may be read by any
- number of concurrent [`skf_skin`] calls once set.
+ number of concurrent `skf_skin` calls once set.
  */
 typedef struct SkfFrame SkfFrame;
 
@@ -77,23 +89,24 @@ typedef struct SkfModel SkfModel;
 typedef struct SkfScratch SkfScratch;
 
 /*
- A joint's local transform (relative to its parent), applied as translation · rotation ·
- scale, as in glTF.
+ Bind-time settings of the fast path ([`skf_fast_options_default`] gives the measured
+ defaults: 128 nodes, 4 neighbours, 4 base joints).
  */
-typedef struct SkfTransform {
+typedef struct SkfFastOptions {
   /*
-   Translation in the parent's frame.
+   Nodes at which SkinNet runs per frame (capped at the mesh's welded vertex count).
    */
-  float translation[3];
+  size_t nodes;
   /*
-   Unit quaternion, `x, y, z, w`.
+   Nodes each vertex interpolates from (1 to 8).
    */
-  float rotation[4];
+  size_t neighbours;
   /*
-   Per-axis scale.
+   Strongest bind-pose joints kept per vertex as its exact base (0 to 8; 0 interpolates
+   whole weights from the nodes).
    */
-  float scale[3];
-} SkfTransform;
+  size_t base_influences;
+} SkfFastOptions;
 
 /*
  Where each skinned attribute goes in one vertex of an interleaved buffer: byte offsets
@@ -119,9 +132,119 @@ typedef struct SkfVertexLayout {
   size_t tangent_offset;
 } SkfVertexLayout;
 
+/*
+ A joint's local transform (relative to its parent), applied as translation · rotation ·
+ scale, as in glTF.
+ */
+typedef struct SkfTransform {
+  /*
+   Translation in the parent's frame.
+   */
+  float translation[3];
+  /*
+   Unit quaternion, `x, y, z, w`.
+   */
+  float rotation[4];
+  /*
+   Per-axis scale.
+   */
+  float scale[3];
+} SkfTransform;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
+
+/*
+ The default fast-path settings.
+ */
+struct SkfFastOptions skf_fast_options_default(void);
+
+/*
+ Binds `mesh` (bound to `model` by `skf_mesh_bind`) for the fast path: `triangles` holds
+ `3 × triangle_count` vertex indices (nullable when `triangle_count` is 0: a point cloud,
+ whose nodes are then found by straight-line distance), `options` (nullable: the defaults)
+ the settings. Costs one exact SkinNet evaluation of every vertex and graph searches, once.
+ Release with [`skf_fast_mesh_free`].
+
+ # Safety
+ `model` and `mesh` must be live; `triangles` must hold the stated number of indices;
+ `options` null or readable; `out_fast_mesh` writable.
+ */
+enum SkfStatus skf_fast_mesh_bind(const struct SkfModel *model,
+                                  const struct SkfMesh *mesh,
+                                  const uint32_t *triangles,
+                                  size_t triangle_count,
+                                  const struct SkfFastOptions *options,
+                                  struct SkfFastMesh **out_fast_mesh);
+
+/*
+ Releases a fast mesh (null is ignored).
+
+ # Safety
+ `fast_mesh` must come from [`skf_fast_mesh_bind`] and not have been freed.
+ */
+void skf_fast_mesh_free(struct SkfFastMesh *fast_mesh);
+
+/*
+ The number of nodes SkinNet runs at per frame for `fast_mesh` (`*out_count`).
+
+ # Safety
+ `fast_mesh` must be live; `out_count` writable.
+ */
+enum SkfStatus skf_fast_mesh_node_count(const struct SkfFastMesh *fast_mesh, size_t *out_count);
+
+/*
+ Makes the node buffers of `fast_mesh`. Release with [`skf_fast_nodes_free`].
+
+ # Safety
+ `fast_mesh` must be live; `out_nodes` writable.
+ */
+enum SkfStatus skf_fast_nodes_new(const struct SkfFastMesh *fast_mesh,
+                                  struct SkfFastNodes **out_nodes);
+
+/*
+ Releases node buffers (null is ignored).
+
+ # Safety
+ `nodes` must come from [`skf_fast_nodes_new`] and not have been freed.
+ */
+void skf_fast_nodes_free(struct SkfFastNodes *nodes);
+
+/*
+ Runs SkinNet at `fast_mesh`'s nodes for the frame's pose into `nodes`: once per frame, after
+ `skf_frame_set_pose` and before [`skf_skin_fast`]. Does not allocate.
+
+ # Safety
+ All handles must be live; `nodes` and `scratch` used by no other thread.
+ */
+enum SkfStatus skf_fast_nodes_update(const struct SkfModel *model,
+                                     const struct SkfFastMesh *fast_mesh,
+                                     const struct SkfFrame *frame,
+                                     struct SkfScratch *scratch,
+                                     struct SkfFastNodes *nodes);
+
+/*
+ Skins vertices `first_vertex .. first_vertex + count` of `fast_mesh` with the fast path's
+ weights for the frame's pose (`nodes` updated for it by [`skf_fast_nodes_update`]) into
+ `out`, laid out as for `skf_skin`. `method` is [`SKF_METHOD_LBS`] or [`SKF_METHOD_DQS`];
+ `influences` (1 to 8) is the number of strongest joints DQS keeps per vertex (LBS ignores
+ it). Does not allocate; ranges of one frame may be skinned concurrently.
+
+ # Safety
+ All handles must be live; `out` must point to `out_len` writable bytes no other thread
+ writes.
+ */
+enum SkfStatus skf_skin_fast(const struct SkfFastMesh *fast_mesh,
+                             const struct SkfFrame *frame,
+                             const struct SkfFastNodes *nodes,
+                             uint32_t method,
+                             size_t influences,
+                             size_t first_vertex,
+                             size_t count,
+                             const struct SkfVertexLayout *layout,
+                             uint8_t *out,
+                             size_t out_len);
 
 /*
  Makes a frame for `model` (not posed until [`skf_frame_set_pose`] succeeds). Release with
@@ -142,10 +265,10 @@ void skf_frame_free(struct SkfFrame *frame);
 
 /*
  Poses the frame: `locals` holds `count` local transforms, in the engine's joint order when
- the model has a joint map ([`skf_model_map_joints`]), else in the model's. Runs
- forward kinematics, the pose features and the network's pose terms. Does not allocate
- (except once after the joint map grew). A wrong count or a NaN transform is refused and
- leaves the frame unposed.
+ the model has a joint map (`skf_model_map_joints`), else in the model's. Runs forward
+ kinematics, the pose features and the network's pose terms. Does not allocate (except once
+ after the joint map grew). A wrong count or a NaN transform is refused and leaves the frame
+ unposed.
 
  # Safety
  `frame` must be a live frame of `model` that no other thread uses; `locals` must point to
@@ -236,11 +359,11 @@ enum SkfStatus skf_model_joint_name(const struct SkfModel *model,
 
 /*
  Maps the engine's skeleton onto the model by joint name: `names[i]` is the engine's joint
- `i`; from now on [`skf_frame_set_pose`] takes `count` transforms in the engine's
- order. `parents` (nullable) holds each engine joint's parent index, `-1` for a root; when
- given, the hierarchies must agree on the mapped joints. Every model joint must be named
- exactly once; extra engine joints are ignored. Call at load time, before the model is
- shared between threads. On failure the previous map is kept.
+ `i`; from now on `skf_frame_set_pose` takes `count` transforms in the engine's order.
+ `parents` (nullable) holds each engine joint's parent index, `-1` for a root; when given,
+ the hierarchies must agree on the mapped joints. Every model joint must be named exactly
+ once; extra engine joints are ignored. Call at load time, before the model is shared
+ between threads. On failure the previous map is kept.
 
  # Safety
  `model` must be a live model no other thread uses; `names` must point to `count` pointers

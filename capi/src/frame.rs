@@ -31,7 +31,7 @@ impl From<&SkfTransform> for Transform {
 }
 
 /// One pose of a model (opaque). One frame per character instance; a frame may be read by any
-/// number of concurrent [`skf_skin`] calls once set.
+/// number of concurrent `skf_skin` calls once set.
 pub struct SkfFrame {
     model_id: *const SkfModel,
     pub(crate) state: FrameState,
@@ -79,10 +79,10 @@ pub unsafe extern "C" fn skf_frame_free(frame: *mut SkfFrame) {
 }
 
 /// Poses the frame: `locals` holds `count` local transforms, in the engine's joint order when
-/// the model has a joint map ([`skf_model_map_joints`]), else in the model's. Runs
-/// forward kinematics, the pose features and the network's pose terms. Does not allocate
-/// (except once after the joint map grew). A wrong count or a NaN transform is refused and
-/// leaves the frame unposed.
+/// the model has a joint map (`skf_model_map_joints`), else in the model's. Runs forward
+/// kinematics, the pose features and the network's pose terms. Does not allocate (except once
+/// after the joint map grew). A wrong count or a NaN transform is refused and leaves the frame
+/// unposed.
 ///
 /// # Safety
 /// `frame` must be a live frame of `model` that no other thread uses; `locals` must point to

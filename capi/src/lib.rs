@@ -17,20 +17,25 @@
 //! skf_skin(model, mesh, frame, scratch, SKF_METHOD_LBS, 0, vertex_count, &layout, vbo, vbo_len);
 //! ```
 //!
+//! The fast path (SkinNet at a few nodes per frame, the other vertices interpolated) adds a
+//! bind ([`skf_fast_mesh_bind`]) and a per-frame node update ([`skf_fast_nodes_update`]) before
+//! [`skf_skin_fast`].
+//!
 //! Contracts:
 //! - Every function returns an [`SkfStatus`]; on failure [`skf_last_error`] gives a message
 //!   naming the function and the bad argument or field. Bad arguments (null pointers, wrong
 //!   lengths, NaN transforms, truncated files, handles of another model) are refused, never
 //!   undefined behaviour as far as a pointer can be checked (null, alignment, size).
 //! - No panic unwinds into C: a bug returns `SKF_STATUS_INTERNAL`.
-//! - [`skf_frame_set_pose`] and [`skf_skin`] do not allocate (the error path writes its
-//!   message, which does).
+//! - [`skf_frame_set_pose`], [`skf_skin`], [`skf_fast_nodes_update`] and [`skf_skin_fast`] do
+//!   not allocate (the error path writes its message, which does).
 //! - Handles are not thread-safe to mutate; models, meshes and posed frames may be read by any
 //!   number of threads, each skinning with its own scratch.
 //!
 //! `unsafe` here is the C boundary itself: each exported function dereferences the caller's
 //! pointers only through the checks of the private `ptr` module.
 
+mod fast;
 mod frame;
 mod mesh;
 mod model;
@@ -38,6 +43,11 @@ mod ptr;
 mod skin;
 mod status;
 
+pub use fast::{
+    SkfFastMesh, SkfFastNodes, SkfFastOptions, skf_fast_mesh_bind, skf_fast_mesh_free,
+    skf_fast_mesh_node_count, skf_fast_nodes_free, skf_fast_nodes_new, skf_fast_nodes_update,
+    skf_fast_options_default, skf_skin_fast,
+};
 pub use frame::{SkfFrame, SkfTransform, skf_frame_free, skf_frame_new, skf_frame_set_pose};
 pub use mesh::{SkfMesh, skf_mesh_bind, skf_mesh_free, skf_mesh_vertex_count};
 pub use model::{

@@ -156,11 +156,11 @@ pub unsafe extern "C" fn skf_model_joint_name(
 }
 
 /// Maps the engine's skeleton onto the model by joint name: `names[i]` is the engine's joint
-/// `i`; from now on [`skf_frame_set_pose`] takes `count` transforms in the engine's
-/// order. `parents` (nullable) holds each engine joint's parent index, `-1` for a root; when
-/// given, the hierarchies must agree on the mapped joints. Every model joint must be named
-/// exactly once; extra engine joints are ignored. Call at load time, before the model is
-/// shared between threads. On failure the previous map is kept.
+/// `i`; from now on `skf_frame_set_pose` takes `count` transforms in the engine's order.
+/// `parents` (nullable) holds each engine joint's parent index, `-1` for a root; when given,
+/// the hierarchies must agree on the mapped joints. Every model joint must be named exactly
+/// once; extra engine joints are ignored. Call at load time, before the model is shared
+/// between threads. On failure the previous map is kept.
 ///
 /// # Safety
 /// `model` must be a live model no other thread uses; `names` must point to `count` pointers

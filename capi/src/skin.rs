@@ -47,7 +47,7 @@ impl From<&SkfVertexLayout> for VertexLayout {
 
 /// Per-thread working memory of the network (opaque): one per thread that skins.
 pub struct SkfScratch {
-    scratch: Scratch,
+    pub(crate) scratch: Scratch,
 }
 
 /// Makes scratch memory for `model`'s network. Release with [`skf_scratch_free`].

@@ -1,0 +1,575 @@
+//! The fast path through the C ABI: results equal the Rust fast path's bit for bit (LBS and DQS,
+//! whole mesh and a range inside it, triangle mesh and point cloud), the interleaved writes
+//! leave other bytes alone, the per-frame calls do not allocate, and every bad argument returns
+//! its status with a message naming the function and the field.
+
+#[path = "../../runtime/tests/common/mod.rs"]
+mod common;
+#[path = "../../runtime/tests/common/counting.rs"]
+mod counting;
+
+use std::ffi::CStr;
+use std::ptr::{null, null_mut};
+
+use glam::{Vec3, Vec4};
+use skinfield::*;
+use skinfield_runtime::{
+    FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Pose, Scratch, SkinNetModel,
+};
+
+fn last_error() -> String {
+    // SAFETY: skf_last_error never returns null and the string lives until the next failure.
+    unsafe { CStr::from_ptr(skf_last_error()) }
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// Asserts a failure with `status` whose message contains every one of `words`.
+#[track_caller]
+fn fails(got: SkfStatus, status: SkfStatus, words: &[&str]) {
+    let message = last_error();
+    assert_eq!(got, status, "{message}");
+    for w in words {
+        assert!(message.contains(w), "`{message}` does not mention `{w}`");
+    }
+}
+
+#[track_caller]
+fn ok(got: SkfStatus) {
+    assert_eq!(got, SkfStatus::Ok, "{}", last_error());
+}
+
+fn c_pose(pose: &Pose) -> Vec<SkfTransform> {
+    pose.locals
+        .iter()
+        .map(|t| SkfTransform {
+            translation: t.translation.to_array(),
+            rotation: t.rotation.to_array(),
+            scale: t.scale.to_array(),
+        })
+        .collect()
+}
+
+/// A model (no joint map: frames take its own joint order), an ellipsoid bound to it, and the
+/// handles of the fast path made through the C ABI (freed on drop).
+struct Fast {
+    bytes: Vec<u8>,
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    tangents: Vec<Vec4>,
+    triangles: Vec<[u32; 3]>,
+    model: *mut SkfModel,
+    mesh: *mut SkfMesh,
+    fast_mesh: *mut SkfFastMesh,
+    nodes: *mut SkfFastNodes,
+    frame: *mut SkfFrame,
+    scratch: *mut SkfScratch,
+}
+
+impl Drop for Fast {
+    fn drop(&mut self) {
+        // SAFETY: each handle is live (or null) and freed once.
+        unsafe {
+            skf_fast_nodes_free(self.nodes);
+            skf_fast_mesh_free(self.fast_mesh);
+            skf_scratch_free(self.scratch);
+            skf_frame_free(self.frame);
+            skf_mesh_free(self.mesh);
+            skf_model_free(self.model);
+        }
+    }
+}
+
+const OPTIONS: SkfFastOptions = SkfFastOptions {
+    nodes: 48,
+    neighbours: 4,
+    base_influences: 4,
+};
+
+fn setup(seed: u64, options: &SkfFastOptions, triangles: bool) -> Fast {
+    let bytes = common::vinecs_bytes(7, seed);
+    let (positions, normals, tris) = common::ellipsoid(10, 14);
+    let (_, tangents) = common::random_frames(positions.len(), &mut common::rng(seed + 1));
+    let mut f = Fast {
+        bytes,
+        positions,
+        normals,
+        tangents,
+        triangles: if triangles { tris } else { Vec::new() },
+        model: null_mut(),
+        mesh: null_mut(),
+        fast_mesh: null_mut(),
+        nodes: null_mut(),
+        frame: null_mut(),
+        scratch: null_mut(),
+    };
+    // SAFETY: every pointer below points to live data of the stated length.
+    unsafe {
+        ok(skf_model_load(
+            f.bytes.as_ptr(),
+            f.bytes.len(),
+            &mut f.model,
+        ));
+        ok(skf_mesh_bind(
+            f.model,
+            f.positions.as_ptr().cast(),
+            f.normals.as_ptr().cast(),
+            f.tangents.as_ptr().cast(),
+            f.positions.len(),
+            &mut f.mesh,
+        ));
+        let tris = if f.triangles.is_empty() {
+            null()
+        } else {
+            f.triangles.as_ptr().cast()
+        };
+        ok(skf_fast_mesh_bind(
+            f.model,
+            f.mesh,
+            tris,
+            f.triangles.len(),
+            options,
+            &mut f.fast_mesh,
+        ));
+        ok(skf_fast_nodes_new(f.fast_mesh, &mut f.nodes));
+        ok(skf_frame_new(f.model, &mut f.frame));
+        ok(skf_scratch_new(f.model, &mut f.scratch));
+    }
+    f
+}
+
+/// A 64-byte vertex: position at 0, 8 bytes the skinning must not touch, normal at 20, tangent
+/// at 40, padding after.
+const LAYOUT: SkfVertexLayout = SkfVertexLayout {
+    stride: 64,
+    position_offset: 0,
+    normal_offset: 20,
+    tangent_offset: 40,
+};
+
+fn read_f32s<const N: usize>(bytes: &[u8]) -> [f32; N] {
+    core::array::from_fn(|k| f32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().unwrap()))
+}
+
+#[test]
+fn the_c_fast_path_skins_exactly_as_the_rust_fast_path() {
+    for triangles in [true, false] {
+        let f = setup(21, &OPTIONS, triangles);
+        let net = SkinNetModel::from_skf(&f.bytes).unwrap();
+        let options = FastOptions {
+            nodes: OPTIONS.nodes,
+            neighbours: OPTIONS.neighbours,
+            base_influences: OPTIONS.base_influences,
+            ..FastOptions::DEFAULT
+        };
+        let mesh = FastMesh::bind(&net, &f.positions, &f.triangles, &options).unwrap();
+        let mut nodes = FastFrame::new(&mesh);
+        let mut frame = FrameState::new(&net);
+        let mut scratch = Scratch::new(&net);
+        let mut node_count = 0;
+        // SAFETY: live handle, writable count.
+        ok(unsafe { skf_fast_mesh_node_count(f.fast_mesh, &mut node_count) });
+        assert_eq!(node_count, mesh.node_count());
+        assert!(node_count > 0 && node_count <= OPTIONS.nodes);
+
+        let n = f.positions.len();
+        let mut rng = common::rng(22);
+        for (step, method, code, influences, first, count) in [
+            (0, Method::Lbs, SKF_METHOD_LBS, 4, 0, n),
+            (1, Method::Dqs, SKF_METHOD_DQS, 3, 0, n),
+            (2, Method::Lbs, SKF_METHOD_LBS, 4, 37, 90),
+        ] {
+            let pose = common::random_pose(net.skeleton(), &mut rng, 0.6);
+            let locals = c_pose(&pose);
+            // SAFETY: a valid layout pointer.
+            let len = unsafe { skf_vertex_buffer_len(&LAYOUT, count) };
+            let mut vbo = vec![0xABu8; len];
+            // SAFETY: live handles, arrays of the stated lengths.
+            unsafe {
+                ok(skf_frame_set_pose(
+                    f.frame,
+                    f.model,
+                    locals.as_ptr(),
+                    locals.len(),
+                ));
+                ok(skf_fast_nodes_update(
+                    f.model,
+                    f.fast_mesh,
+                    f.frame,
+                    f.scratch,
+                    f.nodes,
+                ));
+                ok(skf_skin_fast(
+                    f.fast_mesh,
+                    f.frame,
+                    f.nodes,
+                    code,
+                    influences,
+                    first,
+                    count,
+                    &LAYOUT,
+                    vbo.as_mut_ptr(),
+                    vbo.len(),
+                ));
+            }
+            frame.set_pose(&net, &pose).unwrap();
+            nodes.update(&net, &mesh, &frame, &mut scratch).unwrap();
+            let mut p = vec![Vec3::ZERO; count];
+            let mut nn = vec![Vec3::ZERO; count];
+            let mut t = vec![Vec4::ZERO; count];
+            FastSkinJob {
+                mesh: &mesh,
+                frame: &frame,
+                nodes: &nodes,
+                method,
+                influences,
+                first_vertex: first,
+                rest_normals: Some(&f.normals),
+                rest_tangents: Some(&f.tangents),
+                out_positions: &mut p,
+                out_normals: Some(&mut nn),
+                out_tangents: Some(&mut t),
+                out_weights: None,
+            }
+            .run()
+            .unwrap();
+            for v in 0..count {
+                let bytes = &vbo[v * 64..];
+                let what = format!("step {step}, triangles {triangles}, vertex {}", first + v);
+                assert_eq!(read_f32s::<3>(&bytes[0..]), p[v].to_array(), "{what}");
+                assert_eq!(read_f32s::<3>(&bytes[20..]), nn[v].to_array(), "{what}");
+                assert_eq!(read_f32s::<4>(&bytes[40..]), t[v].to_array(), "{what}");
+                assert!(
+                    bytes[12..20].iter().all(|&b| b == 0xAB),
+                    "{what}: gap written"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn per_frame_fast_calls_do_not_allocate() {
+    let f = setup(31, &OPTIONS, true);
+    let net = SkinNetModel::from_skf(&f.bytes).unwrap();
+    let mut rng = common::rng(32);
+    let poses: Vec<Vec<SkfTransform>> = (0..3)
+        .map(|_| c_pose(&common::random_pose(net.skeleton(), &mut rng, 0.6)))
+        .collect();
+    let n = f.positions.len();
+    // SAFETY: a valid layout pointer.
+    let mut vbo = vec![0u8; unsafe { skf_vertex_buffer_len(&LAYOUT, n) }];
+    let count = counting::count_allocations(|| {
+        for (k, pose) in poses.iter().enumerate() {
+            // SAFETY: live handles, arrays of the stated lengths.
+            unsafe {
+                ok(skf_frame_set_pose(
+                    f.frame,
+                    f.model,
+                    pose.as_ptr(),
+                    pose.len(),
+                ));
+                ok(skf_fast_nodes_update(
+                    f.model,
+                    f.fast_mesh,
+                    f.frame,
+                    f.scratch,
+                    f.nodes,
+                ));
+                ok(skf_skin_fast(
+                    f.fast_mesh,
+                    f.frame,
+                    f.nodes,
+                    (k % 2) as u32,
+                    4,
+                    0,
+                    n,
+                    &LAYOUT,
+                    vbo.as_mut_ptr(),
+                    vbo.len(),
+                ));
+            }
+        }
+    });
+    assert_eq!(count, 0, "the per-frame fast calls allocated {count} times");
+    assert!(vbo.iter().any(|&b| b != 0));
+}
+
+#[test]
+fn every_bad_fast_path_argument_is_a_status_naming_it() {
+    use SkfStatus::{InvalidArgument as Invalid, NullPointer as Null};
+    let f = setup(41, &OPTIONS, true);
+    let other = setup(42, &OPTIONS, true);
+    let net = SkinNetModel::from_skf(&f.bytes).unwrap();
+    let pose = c_pose(&common::random_pose(
+        net.skeleton(),
+        &mut common::rng(43),
+        0.5,
+    ));
+    let n = f.positions.len();
+    // SAFETY: a valid layout pointer.
+    let len = unsafe { skf_vertex_buffer_len(&LAYOUT, n) };
+    let mut vbo = vec![0u8; len];
+    let tris: *const u32 = f.triangles.as_ptr().cast();
+    let mut out_mesh: *mut SkfFastMesh = null_mut();
+    let mut out_nodes: *mut SkfFastNodes = null_mut();
+    let mut count = 0usize;
+    // SAFETY: every non-null pointer points to live data of the stated length; the null ones
+    // are what is tested.
+    unsafe {
+        let bind = |model, mesh, tris, tc, options, out| {
+            let s = skf_fast_mesh_bind(model, mesh, tris, tc, options, out);
+            if s == SkfStatus::Ok {
+                skf_fast_mesh_free(*out);
+            }
+            s
+        };
+        let (tc, opt) = (f.triangles.len(), &OPTIONS as *const SkfFastOptions);
+        let out: *mut *mut SkfFastMesh = &mut out_mesh;
+        fails(
+            bind(null(), f.mesh, tris, tc, opt, out),
+            Null,
+            &["skf_fast_mesh_bind", "model"],
+        );
+        fails(
+            bind(f.model, null(), tris, tc, opt, out),
+            Null,
+            &["skf_fast_mesh_bind", "mesh"],
+        );
+        fails(
+            bind(f.model, f.mesh, null(), tc, opt, out),
+            Null,
+            &["skf_fast_mesh_bind", "triangles"],
+        );
+        fails(
+            bind(f.model, f.mesh, tris, tc, opt, null_mut()),
+            Null,
+            &["skf_fast_mesh_bind", "out_fast_mesh"],
+        );
+        fails(
+            bind(f.model, f.mesh, tris, usize::MAX, opt, out),
+            Invalid,
+            &["skf_fast_mesh_bind", "triangle_count"],
+        );
+        let mut bad_tris = f.triangles.clone();
+        bad_tris[5][1] = n as u32;
+        fails(
+            bind(f.model, f.mesh, bad_tris.as_ptr().cast(), tc, opt, out),
+            Invalid,
+            &["skf_fast_mesh_bind", "triangles", &n.to_string()],
+        );
+        for (options, field) in [
+            (
+                SkfFastOptions {
+                    neighbours: 0,
+                    ..OPTIONS
+                },
+                "neighbours",
+            ),
+            (
+                SkfFastOptions {
+                    neighbours: 9,
+                    ..OPTIONS
+                },
+                "neighbours",
+            ),
+            (
+                SkfFastOptions {
+                    base_influences: 9,
+                    ..OPTIONS
+                },
+                "base_influences",
+            ),
+            (
+                SkfFastOptions {
+                    nodes: 0,
+                    ..OPTIONS
+                },
+                "nodes",
+            ),
+        ] {
+            fails(
+                bind(f.model, f.mesh, tris, tc, &options, out),
+                Invalid,
+                &["skf_fast_mesh_bind", field],
+            );
+        }
+        // Null options take the defaults.
+        ok(bind(f.model, f.mesh, tris, tc, null(), out));
+
+        fails(
+            skf_fast_mesh_node_count(null(), &mut count),
+            Null,
+            &["skf_fast_mesh_node_count", "fast_mesh"],
+        );
+        fails(
+            skf_fast_mesh_node_count(f.fast_mesh, null_mut()),
+            Null,
+            &["skf_fast_mesh_node_count", "out_count"],
+        );
+        fails(
+            skf_fast_nodes_new(null(), &mut out_nodes),
+            Null,
+            &["skf_fast_nodes_new", "fast_mesh"],
+        );
+        fails(
+            skf_fast_nodes_new(f.fast_mesh, null_mut()),
+            Null,
+            &["skf_fast_nodes_new", "out_nodes"],
+        );
+
+        let update = |model, fast_mesh, frame, scratch, nodes| {
+            skf_fast_nodes_update(model, fast_mesh, frame, scratch, nodes)
+        };
+        let skin = |fast_mesh, frame, nodes, method, influences, first, count, out: &mut [u8]| {
+            skf_skin_fast(
+                fast_mesh,
+                frame,
+                nodes,
+                method,
+                influences,
+                first,
+                count,
+                &LAYOUT,
+                out.as_mut_ptr(),
+                out.len(),
+            )
+        };
+        // Before any pose.
+        fails(
+            update(f.model, f.fast_mesh, f.frame, f.scratch, f.nodes),
+            Invalid,
+            &["skf_fast_nodes_update", "pose"],
+        );
+        ok(skf_frame_set_pose(
+            f.frame,
+            f.model,
+            pose.as_ptr(),
+            pose.len(),
+        ));
+        // Posed, nodes not updated yet.
+        fails(
+            skin(f.fast_mesh, f.frame, f.nodes, 0, 4, 0, n, &mut vbo),
+            Invalid,
+            &["skf_skin_fast", "nodes", "another pose"],
+        );
+        let (model, fast_mesh, frame) = (
+            f.model.cast_const(),
+            f.fast_mesh.cast_const(),
+            f.frame.cast_const(),
+        );
+        for (i, (model, fast_mesh, frame, scratch, nodes)) in [
+            (null(), fast_mesh, frame, f.scratch, f.nodes),
+            (model, null(), frame, f.scratch, f.nodes),
+            (model, fast_mesh, null(), f.scratch, f.nodes),
+            (model, fast_mesh, frame, null_mut(), f.nodes),
+            (model, fast_mesh, frame, f.scratch, null_mut()),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let name = ["model", "fast_mesh", "frame", "scratch", "nodes"][i];
+            fails(
+                update(model, fast_mesh, frame, scratch, nodes),
+                Null,
+                &["skf_fast_nodes_update", name],
+            );
+        }
+        // Handles of another model or mesh.
+        fails(
+            update(other.model, f.fast_mesh, f.frame, f.scratch, f.nodes),
+            Invalid,
+            &["skf_fast_nodes_update", "another model or mesh"],
+        );
+        fails(
+            update(f.model, f.fast_mesh, f.frame, f.scratch, other.nodes),
+            Invalid,
+            &["skf_fast_nodes_update", "nodes", "another model or mesh"],
+        );
+        ok(update(f.model, f.fast_mesh, f.frame, f.scratch, f.nodes));
+        ok(skin(f.fast_mesh, f.frame, f.nodes, 0, 4, 0, n, &mut vbo));
+
+        fails(
+            skin(null(), f.frame, f.nodes, 0, 4, 0, n, &mut vbo),
+            Null,
+            &["skf_skin_fast", "fast_mesh"],
+        );
+        fails(
+            skin(f.fast_mesh, null(), f.nodes, 0, 4, 0, n, &mut vbo),
+            Null,
+            &["skf_skin_fast", "frame"],
+        );
+        fails(
+            skin(f.fast_mesh, f.frame, null(), 0, 4, 0, n, &mut vbo),
+            Null,
+            &["skf_skin_fast", "nodes"],
+        );
+        fails(
+            skin(f.fast_mesh, f.frame, f.nodes, 7, 4, 0, n, &mut vbo),
+            Invalid,
+            &["skf_skin_fast", "method"],
+        );
+        fails(
+            skin(f.fast_mesh, f.frame, f.nodes, 1, 0, 0, n, &mut vbo),
+            Invalid,
+            &["skf_skin_fast", "influences"],
+        );
+        fails(
+            skin(f.fast_mesh, f.frame, f.nodes, 1, 9, 0, n, &mut vbo),
+            Invalid,
+            &["skf_skin_fast", "influences"],
+        );
+        fails(
+            skin(f.fast_mesh, f.frame, f.nodes, 0, 4, 1, n, &mut vbo),
+            Invalid,
+            &["skf_skin_fast", "vertex range"],
+        );
+        fails(
+            skin(
+                f.fast_mesh,
+                f.frame,
+                f.nodes,
+                0,
+                4,
+                0,
+                n,
+                &mut vbo[..len - 1],
+            ),
+            Invalid,
+            &["skf_skin_fast", "out"],
+        );
+        fails(
+            skin(other.fast_mesh, f.frame, f.nodes, 0, 4, 0, n, &mut vbo),
+            Invalid,
+            &["skf_skin_fast", "nodes", "another model or mesh"],
+        );
+        // A new pose makes the nodes stale until they are updated again.
+        ok(skf_frame_set_pose(
+            f.frame,
+            f.model,
+            pose.as_ptr(),
+            pose.len(),
+        ));
+        fails(
+            skin(f.fast_mesh, f.frame, f.nodes, 0, 4, 0, n, &mut vbo),
+            Invalid,
+            &["skf_skin_fast", "nodes", "another pose"],
+        );
+        let null_layout = skf_skin_fast(
+            f.fast_mesh,
+            f.frame,
+            f.nodes,
+            0,
+            4,
+            0,
+            n,
+            null(),
+            vbo.as_mut_ptr(),
+            vbo.len(),
+        );
+        fails(null_layout, Null, &["skf_skin_fast", "layout"]);
+        // Null handles are ignored by the free functions.
+        skf_fast_mesh_free(null_mut());
+        skf_fast_nodes_free(null_mut());
+    }
+}
