@@ -6,7 +6,7 @@
 //! joints near it. The file stores anchors in the canonical space with their candidate lists; a
 //! vertex of any mesh takes the list of its nearest anchor ([`nearest_anchors`], the same rule
 //! the trainer uses for its query points), and every other joint's weight is exactly zero
-//! ([`mask_logits`] before the softmax, [`clear_masked`] after it).
+//! (`mask_logits` before the softmax, `clear_masked` after it).
 
 use alloc::vec;
 use alloc::vec::Vec;

@@ -7,7 +7,7 @@
 //! - a joint's `OFFSET` is its bind local translation; bind rotations are the identity;
 //! - each joint lists its own channels, in its own order (orders differ within one file); the
 //!   rotation channels, in degrees, compose as `R(a₀)·R(a₁)·R(a₂)` in the order they are listed
-//!   and map to [`JointDofs::Euler`] with the axes in that order;
+//!   and map to [`crate::JointDofs::Euler`] with the axes in that order;
 //! - position channels (on the root, and on any other joint that has them) are added to the
 //!   `OFFSET` in the parent's frame;
 //! - [`BvhOptions::unit_scale`] multiplies every length (offsets and position channels), e.g.

@@ -4,7 +4,7 @@
 //! Layouts (shared by every kernel, so a model expanded once works with any of them):
 //! - activations of a tile: `[feature][TILE]` (one row of `TILE` vertices per feature), so the
 //!   kernels vectorise over vertices and every layer width is legal;
-//! - weights: panels of [`MR`] output rows, `panel[k][r] = W[MR·p + r][k]`, rows past the
+//! - weights: panels of `MR` output rows, `panel[k][r] = W[MR·p + r][k]`, rows past the
 //!   layer's width zero; a panel of a 256-wide layer is 8 KiB and stays in L1 while a tile's
 //!   input rows stream through it.
 //!

@@ -4,12 +4,12 @@
 //! mesh ([`crate::BoundMesh::bind`] on [`Resampled::template`]'s positions): no retraining, no
 //! weight transfer — the network is queried at the new canonical positions.
 //!
-//! * [`simplify`] (fewer vertices): meshoptimizer's edge-collapse simplifier. It only removes
+//! * [`simplify()`] (fewer vertices): meshoptimizer's edge-collapse simplifier. It only removes
 //!   vertices, so every kept vertex *is* a source vertex and its attributes carry over exactly.
 //!   meshoptimizer treats vertices that share a position but not their attributes (UV seams) as
 //!   a seam and collapses both sides together, and border vertices only along the border, so
 //!   seams and borders keep their shape.
-//! * [`subdivide`] (more vertices): adaptive longest-edge bisection. The longest edge is split
+//! * [`subdivide()`] (more vertices): adaptive longest-edge bisection. The longest edge is split
 //!   at its midpoint, again and again, until the target count is reached; each split adds one
 //!   vertex (per seam copy of the edge), so the count is reached exactly, and the surface does
 //!   not move (no smoothing: the resampled mesh is the same surface, only sampled more densely,

@@ -135,7 +135,7 @@ pub struct TemplateReport {
     pub cell: f32,
     /// Vertices marching produced (before simplification).
     pub marched_vertices: usize,
-    /// Simplification passes until the mesh was closed (see [`SIMPLIFY_ATTEMPTS`]).
+    /// Simplification passes until the mesh was closed (at most `SIMPLIFY_ATTEMPTS`).
     pub simplify_passes: usize,
     /// Whether the final mesh is closed and consistently oriented.
     pub closed: bool,

@@ -55,7 +55,7 @@ pub struct TrainData {
     /// Training frames.
     pub frames: Vec<Frame>,
     /// Full-resolution query points of the training vertices (`None`: query the training
-    /// vertices themselves, e.g. at full resolution); see [`queries`].
+    /// vertices themselves, e.g. at full resolution); see [`super::queries`].
     pub queries: Option<QueryCells>,
     /// The world's up axis the pose features remove the heading about; recorded in the
     /// exported `.skf` so the runtime computes the same features.

@@ -2,11 +2,12 @@
 //! with no ground-truth geometry.
 //!
 //! A user cannot tell a broken model from a good one without ground truth, so the trainer holds
-//! out a few training frames ([`TrainConfig::validation_frames`], spread evenly over the
+//! out a few training frames ([`super::TrainConfig::validation_frames`], spread evenly over the
 //! capture's training frames), scores the posed training template against their masks every
-//! [`TrainConfig::validation_every`] image iterations, keeps the best-scoring parameter average
-//! for export, and `trainer train` refuses to write a model that explains the held-out images
-//! worse than the initial weights do ([`TrainConfig::refuse_worse_than_initial`]).
+//! [`super::TrainConfig::validation_every`] image iterations, keeps the best-scoring parameter
+//! average for export, and `trainer train` refuses to write a model that explains the held-out
+//! images worse than the initial weights do
+//! ([`super::TrainConfig::refuse_worse_than_initial`]).
 //!
 //! Two figures per score, both from the same views:
 //!
@@ -116,7 +117,7 @@ pub struct WorseThanInitial {
     pub held_out_frames: usize,
 }
 
-/// Which of `n` training frames [`hold_out`] takes for `count` validation frames: the middle
+/// Which of `n` training frames `hold_out` takes for `count` validation frames: the middle
 /// of each of `count` equal spans; none when fewer than four frames per held-out frame remain.
 #[must_use]
 pub fn held_out_indices(n: usize, count: usize) -> Vec<usize> {
