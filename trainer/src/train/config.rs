@@ -98,11 +98,13 @@ pub struct TrainConfig {
     /// pose, so one frame per iteration sees as many vertices per step at a quarter of the cost
     /// of four, and the poses still vary from step to step.
     pub warm_start_batch: usize,
-    /// Weight of the warm start's posed-position term, per cm² ([`super::Trainer::warm_step`]);
-    /// 0 (KL alone) by default. Measured after 300 warm-start iterations on the built-in capture
-    /// (Chamfer): 1 made the KL rise to 3.1 by iteration 100 while the position error fell to
-    /// 62 cm² (stopped); 0.01 gave 1.130 cm, against 1.059 cm for KL alone on the previous
-    /// training template (the simplifier changed in between, so not a clean comparison).
+    /// Weight of the warm start's posed-position term, whose unit is the squared fraction of the
+    /// template's bounding-box diagonal ([`super::Trainer::warm_step`]); 0 (KL alone) by
+    /// default. Measured after 300 warm-start iterations on the built-in capture (Chamfer) when
+    /// the term was in cm² (its diagonal is 247.6 cm, so 1 per cm² is 61,300 here): 61,300 made
+    /// the KL rise to 3.1 by iteration 100 while the position error fell to 62 cm² (stopped);
+    /// 613 gave 1.130 cm, against 1.059 cm for KL alone on the previous training template (the
+    /// simplifier changed in between, so not a clean comparison).
     pub warm_start_position_weight: f64,
     /// Adam settings (paper: lr 1e-3, gradient values clipped to [−1, 1]).
     pub adam: AdamConfig,

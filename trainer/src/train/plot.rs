@@ -52,7 +52,7 @@ pub fn unit_of(column: &str) -> &'static str {
         c if c.ends_with("_px") || c.starts_with("silhouette") => "pixels",
         "laplacian" => "diagonal²",
         "iou" => "intersection / union",
-        "position_cm2" => "cm²",
+        "position_relative" => "fraction of the diagonal",
         "kl" => "nats",
         "total" => "weighted sum",
         _ => "mean per vertex",

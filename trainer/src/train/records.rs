@@ -51,10 +51,8 @@ pub struct WarmRecord {
     pub iteration: u64,
     /// `KL(w_init ‖ w)` per vertex.
     pub kl: f64,
-    /// Mean squared distance (cm², for metre-scaled templates) between the vertices skinned
-    /// with SkinNet's and with the initial weights.
-    pub position_cm2: f64,
-    /// The root mean square of that distance over the template's bounding-box diagonal.
+    /// The root-mean-square distance between the vertices skinned with SkinNet's and with the
+    /// initial weights, over the template's bounding-box diagonal.
     pub position_relative: f64,
 }
 

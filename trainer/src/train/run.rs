@@ -19,11 +19,8 @@ impl Trainer {
         let csv_path = dir.join("losses.csv");
         let mut csv = reopen_log(&csv_path, LossRecord::CSV_HEADER, self.done)?;
         let warm_path = dir.join("warm_start.csv");
-        let mut warm_csv = reopen_log(
-            &warm_path,
-            "iteration,kl,position_cm2,position_relative",
-            self.warm_done,
-        )?;
+        let mut warm_csv =
+            reopen_log(&warm_path, "iteration,kl,position_relative", self.warm_done)?;
         let total = self.config.warm_start_iterations + self.config.iterations;
         let bar = if progress {
             indicatif::ProgressBar::new(total)
@@ -42,13 +39,13 @@ impl Trainer {
             let r = self.warm_step()?;
             writeln!(
                 warm_csv,
-                "{},{:.6e},{:.6e},{:.6e}",
-                r.iteration, r.kl, r.position_cm2, r.position_relative
+                "{},{:.6e},{:.6e}",
+                r.iteration, r.kl, r.position_relative
             )
             .map_err(io(&warm_path))?;
             bar.set_message(format!(
-                "warm start KL {:.3e}, {:.3e} cm²",
-                r.kl, r.position_cm2
+                "warm start KL {:.3e}, position {:.1e} of the diagonal",
+                r.kl, r.position_relative
             ));
             bar.inc(1);
             if self.config.checkpoint_every > 0

@@ -7,10 +7,12 @@ impl Trainer {
     /// One warm-start iteration on a random batch of frames; returns the objective's terms
     /// before the step. A no-op for the static baseline.
     ///
-    /// The objective is `KL(w_init ‖ w) + λ_pos · ‖x(w) − x(w_init)‖²`, both averaged over the
-    /// batch's vertices: the Kullback–Leibler divergence from the initial weights to SkinNet's,
-    /// plus the squared distance (cm²) between the vertex skinned with SkinNet's weights and with
-    /// the initial ones in the batch's poses (`warm_start_position_weight` = λ_pos).
+    /// The objective is `KL(w_init ‖ w) + λ_pos · ‖x(w) − x(w_init)‖² / D²`, both averaged over
+    /// the batch's vertices: the Kullback–Leibler divergence from the initial weights to
+    /// SkinNet's, plus the squared distance between the vertex skinned with SkinNet's weights
+    /// and with the initial ones in the batch's poses, relative to the squared diagonal `D` of
+    /// the template's bounding box, so the term does not depend on the file's unit of length
+    /// (`warm_start_position_weight` = λ_pos).
     ///
     /// Why these: the squared error of the weights (the first version) has a gradient that
     /// passes through the softmax Jacobian and vanishes as the weights saturate; KL's gradient
@@ -51,13 +53,11 @@ impl Trainer {
         let rest = self.rest_at(query.as_ref())?;
         let offset =
             (lbs(&w, &skinning, &rest)? - self.initial_posing(&init, &skinning, &rest, b)?)?;
-        // m² → cm².
-        let position = (offset.sqr()?.sum_all()? * (1e4 / (b * v) as f64))?;
+        let position =
+            (offset.sqr()?.sum_all()? / ((b * v) as f64 * self.diagonal * self.diagonal))?;
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
         let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
-        let position_cm2 = f64::from(position.to_vec0::<f32>()?);
-        // cm² back to m², then relative to the diagonal.
-        let position_relative = (position_cm2 * 1e-4).sqrt() / self.diagonal;
+        let position_relative = f64::from(position.to_vec0::<f32>()?).max(0.0).sqrt();
         timer.lap(&mut self.profile, KIND, Phase::Skinning);
         let grads = total.backward()?;
         timer.lap(&mut self.profile, KIND, Phase::Backward);
@@ -68,7 +68,6 @@ impl Trainer {
         let record = WarmRecord {
             iteration: self.warm_done,
             kl,
-            position_cm2,
             position_relative,
         };
         self.note_warm(&record);

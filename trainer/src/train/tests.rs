@@ -250,6 +250,7 @@ fn static_baseline_moves_towards_the_silhouettes() {
 #[test]
 fn training_does_not_depend_on_the_unit_of_length() {
     const LAPLACIAN: f64 = 1e10;
+    const POSITION: f64 = 1e5;
     let train = |scale: f32, is_static: bool| {
         let (data, _) = scene_scaled(5, scale);
         let cfg = TrainConfig {
@@ -265,23 +266,41 @@ fn training_does_not_depend_on_the_unit_of_length() {
                 laplacian: LAPLACIAN,
                 ..Default::default()
             },
+            // The warm start's posed-position term on, at a weight that moves the weights.
+            warm_start_position_weight: POSITION,
             ..config()
         };
         let mut t = Trainer::new(data, cfg, is_static).unwrap();
-        for _ in 0..2 {
-            t.warm_step().unwrap();
-        }
+        let warm: Vec<WarmRecord> = (0..3).map(|_| t.warm_step().unwrap()).collect();
         let records: Vec<LossRecord> = (0..12).map(|_| t.step().unwrap()).collect();
         let w = if is_static {
             t.static_weights().unwrap().unwrap()
         } else {
             outputs(&t)
         };
-        (records, w)
+        (warm, records, w)
     };
     for is_static in [true, false] {
-        let (metres, w_m) = train(1.0, is_static);
-        let (centimetres, w_cm) = train(100.0, is_static);
+        let (warm_m, metres, w_m) = train(1.0, is_static);
+        let (warm_cm, centimetres, w_cm) = train(100.0, is_static);
+        if !is_static {
+            // The position term takes part, and both warm-start terms are unit-free.
+            let position = warm_m[0].position_relative.powi(2) * POSITION;
+            assert!(
+                position > 0.1 * warm_m[0].kl,
+                "position term {position} against KL {}",
+                warm_m[0].kl
+            );
+            for (a, b) in warm_m.iter().zip(&warm_cm) {
+                assert!(
+                    (a.kl - b.kl).abs() <= 1e-3 * a.kl && {
+                        let (p, q) = (a.position_relative, b.position_relative);
+                        (p - q).abs() <= 1e-3 * p
+                    },
+                    "warm start: {a:?} (m) vs {b:?} (cm)"
+                );
+            }
+        }
         // The Laplacian takes part: it is not negligible against the silhouettes.
         let lap = metres.iter().map(|r| r.laplacian).sum::<f64>() * LAPLACIAN;
         let sil = metres.iter().map(|r| r.silhouette_boundary).sum::<f64>();
@@ -341,16 +360,16 @@ fn warm_start_regresses_the_initial_weights() {
     };
     let before = mean_error(&t);
     let r = t.warm_step().unwrap();
-    let (first, first_position) = (r.kl, r.position_cm2);
+    let (first, first_position) = (r.kl, r.position_relative.powi(2));
     // The reported value is the KL divergence of the weights before the step, recomputed here.
     let (mut last, mut last_position) = (first, first_position);
     for _ in 1..80 {
         let r = t.warm_step().unwrap();
-        (last, last_position) = (r.kl, r.position_cm2);
+        (last, last_position) = (r.kl, r.position_relative.powi(2));
     }
     assert!(
         last_position < 0.2 * first_position,
-        "posed-position term {first_position} → {last_position} cm²"
+        "posed-position term {first_position} → {last_position} (diagonal²)"
     );
     let w = outputs(&t);
     let kl: f64 = w
