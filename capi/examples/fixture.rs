@@ -43,6 +43,14 @@ fn floats(out: &mut Vec<u8>, values: &[f32]) {
     }
 }
 
+/// Appends each vertex's position then normal (6 f32 per vertex).
+fn positions_and_normals(out: &mut Vec<u8>, positions: &[Vec3], normals: &[Vec3]) {
+    for (p, n) in positions.iter().zip(normals) {
+        floats(out, &p.to_array());
+        floats(out, &n.to_array());
+    }
+}
+
 fn run() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [model_path, asset, out_dir] = args.as_slice() else {
@@ -134,10 +142,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             out_weights: None,
         }
         .run(&mut scratch)?;
-        for (a, b) in p.iter().zip(&nn) {
-            floats(&mut reference, &a.to_array());
-            floats(&mut reference, &b.to_array());
-        }
+        positions_and_normals(&mut reference, &p, &nn);
         nodes.update(&model, &fast_mesh, &frame, &mut scratch)?;
         FastSkinJob {
             mesh: &fast_mesh,
@@ -154,10 +159,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             out_weights: None,
         }
         .run()?;
-        for (a, b) in p.iter().zip(&nn) {
-            floats(&mut reference_fast, &a.to_array());
-            floats(&mut reference_fast, &b.to_array());
-        }
+        positions_and_normals(&mut reference_fast, &p, &nn);
     }
     std::fs::write(out_dir.join("frames.bin"), frames)?;
     std::fs::write(out_dir.join("reference.bin"), reference)?;

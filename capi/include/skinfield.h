@@ -227,7 +227,7 @@ enum SkfStatus skf_fast_nodes_update(const struct SkfModel *model,
 /*
  Skins vertices `first_vertex .. first_vertex + count` of `fast_mesh` with the fast path's
  weights for the frame's pose (`nodes` updated for it by [`skf_fast_nodes_update`]) into
- `out`, laid out as for `skf_skin`. `method` is [`SKF_METHOD_LBS`] or [`SKF_METHOD_DQS`];
+ `out`, laid out as for `skf_skin`. `method` is `SKF_METHOD_LBS` or `SKF_METHOD_DQS`;
  `influences` (1 to 8) is the number of strongest joints DQS keeps per vertex (LBS ignores
  it). Does not allocate; ranges of one frame may be skinned concurrently.
 

@@ -7,15 +7,14 @@
 //! vertex ranges, from any threads.
 
 use skinfield_runtime::{
-    FastFrame, FastMesh, FastOptions, InterleavedJob, Method, SkinNetModel, Vec3, Vec4,
-    WeightSource,
+    FastFrame, FastMesh, FastOptions, InterleavedJob, Vec3, Vec4, WeightSource,
 };
 
 use crate::frame::SkfFrame;
 use crate::mesh::SkfMesh;
 use crate::model::SkfModel;
 use crate::ptr;
-use crate::skin::{SKF_METHOD_DQS, SKF_METHOD_LBS, SkfScratch, SkfVertexLayout};
+use crate::skin::{SkfScratch, SkfVertexLayout, method_from_code};
 use crate::status::{Failure, SkfStatus, guard};
 
 /// Bind-time settings of the fast path ([`skf_fast_options_default`] gives the measured
@@ -215,17 +214,21 @@ pub unsafe extern "C" fn skf_fast_nodes_update(
         let scratch = unsafe { ptr::object_mut(scratch, "scratch") }?;
         // SAFETY: as above.
         let nodes = unsafe { ptr::object_mut(nodes, "nodes") }?;
-        let net: &SkinNetModel = &model.net;
         nodes
             .nodes
-            .update(net, &fast_mesh.fast, &frame.state, &mut scratch.scratch)
+            .update(
+                &model.net,
+                &fast_mesh.fast,
+                &frame.state,
+                &mut scratch.scratch,
+            )
             .map_err(Failure::invalid)
     })
 }
 
 /// Skins vertices `first_vertex .. first_vertex + count` of `fast_mesh` with the fast path's
 /// weights for the frame's pose (`nodes` updated for it by [`skf_fast_nodes_update`]) into
-/// `out`, laid out as for `skf_skin`. `method` is [`SKF_METHOD_LBS`] or [`SKF_METHOD_DQS`];
+/// `out`, laid out as for `skf_skin`. `method` is `SKF_METHOD_LBS` or `SKF_METHOD_DQS`;
 /// `influences` (1 to 8) is the number of strongest joints DQS keeps per vertex (LBS ignores
 /// it). Does not allocate; ranges of one frame may be skinned concurrently.
 ///
@@ -255,15 +258,7 @@ pub unsafe extern "C" fn skf_skin_fast(
         let nodes = unsafe { ptr::object(nodes, "nodes") }?;
         // SAFETY: as above.
         let layout = unsafe { ptr::object(layout, "layout") }?;
-        let method = match method {
-            SKF_METHOD_LBS => Method::Lbs,
-            SKF_METHOD_DQS => Method::Dqs,
-            m => {
-                return Err(Failure::invalid(format!(
-                    "`method` = {m}: accepted SKF_METHOD_LBS (0) or SKF_METHOD_DQS (1)"
-                )));
-            }
-        };
+        let method = method_from_code(method)?;
         // SAFETY: the caller's contract above.
         let out = unsafe { ptr::slice_mut(out, out_len, "out") }?;
         InterleavedJob::<'_, Vec<f32>> {

@@ -45,6 +45,17 @@ impl From<&SkfVertexLayout> for VertexLayout {
     }
 }
 
+/// The skinning method a C caller names by `SKF_METHOD_*`.
+pub(crate) fn method_from_code(method: u32) -> Result<Method, Failure> {
+    match method {
+        SKF_METHOD_LBS => Ok(Method::Lbs),
+        SKF_METHOD_DQS => Ok(Method::Dqs),
+        m => Err(Failure::invalid(format!(
+            "`method` = {m}: accepted SKF_METHOD_LBS (0) or SKF_METHOD_DQS (1)"
+        ))),
+    }
+}
+
 /// Per-thread working memory of the network (opaque): one per thread that skins.
 pub struct SkfScratch {
     pub(crate) scratch: Scratch,
@@ -141,15 +152,7 @@ pub unsafe extern "C" fn skf_skin(
         let scratch = unsafe { ptr::object_mut(scratch, "scratch") }?;
         // SAFETY: as above.
         let layout = unsafe { ptr::object(layout, "layout") }?;
-        let method = match method {
-            SKF_METHOD_LBS => Method::Lbs,
-            SKF_METHOD_DQS => Method::Dqs,
-            m => {
-                return Err(Failure::invalid(format!(
-                    "`method` = {m}: accepted SKF_METHOD_LBS (0) or SKF_METHOD_DQS (1)"
-                )));
-            }
-        };
+        let method = method_from_code(method)?;
         // SAFETY: the caller's contract above.
         let out = unsafe { ptr::slice_mut(out, out_len, "out") }?;
         InterleavedJob {

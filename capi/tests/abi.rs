@@ -5,6 +5,7 @@
 
 #[path = "../../runtime/tests/common/mod.rs"]
 mod common;
+mod support;
 
 use std::ffi::{CStr, CString, c_char};
 use std::ptr::{null, null_mut};
@@ -14,31 +15,7 @@ use skinfield::*;
 use skinfield_runtime::{
     BoundMesh, FrameState, Method, Pose, Scratch, SkinJob, SkinNetModel, Transform,
 };
-
-fn last_error() -> String {
-    // SAFETY: skf_last_error never returns null and the string lives until the next failure.
-    unsafe { CStr::from_ptr(skf_last_error()) }
-        .to_string_lossy()
-        .into_owned()
-}
-
-/// Asserts a failure with `status` whose message contains every one of `words`.
-#[track_caller]
-fn fails(got: SkfStatus, status: SkfStatus, words: &[&str]) {
-    let message = last_error();
-    assert_eq!(got, status, "{message}");
-    for w in words {
-        assert!(message.contains(w), "`{message}` does not mention `{w}`");
-    }
-}
-
-fn c_transform(t: &Transform) -> SkfTransform {
-    SkfTransform {
-        translation: t.translation.to_array(),
-        rotation: t.rotation.to_array(),
-        scale: t.scale.to_array(),
-    }
-}
+use support::{c_transform, fails, last_error};
 
 /// Everything a test needs, made through the C ABI (freed on drop).
 struct Handles {

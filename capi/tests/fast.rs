@@ -7,48 +7,16 @@
 mod common;
 #[path = "../../runtime/tests/common/counting.rs"]
 mod counting;
+mod support;
 
-use std::ffi::CStr;
 use std::ptr::{null, null_mut};
 
 use glam::{Vec3, Vec4};
 use skinfield::*;
 use skinfield_runtime::{
-    FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Pose, Scratch, SkinNetModel,
+    FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Scratch, SkinNetModel,
 };
-
-fn last_error() -> String {
-    // SAFETY: skf_last_error never returns null and the string lives until the next failure.
-    unsafe { CStr::from_ptr(skf_last_error()) }
-        .to_string_lossy()
-        .into_owned()
-}
-
-/// Asserts a failure with `status` whose message contains every one of `words`.
-#[track_caller]
-fn fails(got: SkfStatus, status: SkfStatus, words: &[&str]) {
-    let message = last_error();
-    assert_eq!(got, status, "{message}");
-    for w in words {
-        assert!(message.contains(w), "`{message}` does not mention `{w}`");
-    }
-}
-
-#[track_caller]
-fn ok(got: SkfStatus) {
-    assert_eq!(got, SkfStatus::Ok, "{}", last_error());
-}
-
-fn c_pose(pose: &Pose) -> Vec<SkfTransform> {
-    pose.locals
-        .iter()
-        .map(|t| SkfTransform {
-            translation: t.translation.to_array(),
-            rotation: t.rotation.to_array(),
-            scale: t.scale.to_array(),
-        })
-        .collect()
-}
+use support::{c_pose, fails, ok};
 
 /// A model (no joint map: frames take its own joint order), an ellipsoid bound to it, and the
 /// handles of the fast path made through the C ABI (freed on drop).
@@ -76,6 +44,50 @@ impl Drop for Fast {
             skf_frame_free(self.frame);
             skf_mesh_free(self.mesh);
             skf_model_free(self.model);
+        }
+    }
+}
+
+impl Fast {
+    /// One frame through the C calls: pose, the nodes' update, then vertices `first .. first +
+    /// count` skinned by `method` into `out`. Asserts success; allocates nothing then.
+    #[allow(clippy::too_many_arguments)]
+    fn pose_and_skin(
+        &self,
+        locals: &[SkfTransform],
+        method: u32,
+        influences: usize,
+        first: usize,
+        count: usize,
+        out: &mut [u8],
+    ) {
+        // SAFETY: live handles, arrays of the stated lengths.
+        unsafe {
+            ok(skf_frame_set_pose(
+                self.frame,
+                self.model,
+                locals.as_ptr(),
+                locals.len(),
+            ));
+            ok(skf_fast_nodes_update(
+                self.model,
+                self.fast_mesh,
+                self.frame,
+                self.scratch,
+                self.nodes,
+            ));
+            ok(skf_skin_fast(
+                self.fast_mesh,
+                self.frame,
+                self.nodes,
+                method,
+                influences,
+                first,
+                count,
+                &LAYOUT,
+                out.as_mut_ptr(),
+                out.len(),
+            ));
         }
     }
 }
@@ -184,34 +196,7 @@ fn the_c_fast_path_skins_exactly_as_the_rust_fast_path() {
             // SAFETY: a valid layout pointer.
             let len = unsafe { skf_vertex_buffer_len(&LAYOUT, count) };
             let mut vbo = vec![0xABu8; len];
-            // SAFETY: live handles, arrays of the stated lengths.
-            unsafe {
-                ok(skf_frame_set_pose(
-                    f.frame,
-                    f.model,
-                    locals.as_ptr(),
-                    locals.len(),
-                ));
-                ok(skf_fast_nodes_update(
-                    f.model,
-                    f.fast_mesh,
-                    f.frame,
-                    f.scratch,
-                    f.nodes,
-                ));
-                ok(skf_skin_fast(
-                    f.fast_mesh,
-                    f.frame,
-                    f.nodes,
-                    code,
-                    influences,
-                    first,
-                    count,
-                    &LAYOUT,
-                    vbo.as_mut_ptr(),
-                    vbo.len(),
-                ));
-            }
+            f.pose_and_skin(&locals, code, influences, first, count, &mut vbo);
             frame.set_pose(&net, &pose).unwrap();
             nodes.update(&net, &mesh, &frame, &mut scratch).unwrap();
             let mut p = vec![Vec3::ZERO; count];
@@ -261,34 +246,7 @@ fn per_frame_fast_calls_do_not_allocate() {
     let mut vbo = vec![0u8; unsafe { skf_vertex_buffer_len(&LAYOUT, n) }];
     let count = counting::count_allocations(|| {
         for (k, pose) in poses.iter().enumerate() {
-            // SAFETY: live handles, arrays of the stated lengths.
-            unsafe {
-                ok(skf_frame_set_pose(
-                    f.frame,
-                    f.model,
-                    pose.as_ptr(),
-                    pose.len(),
-                ));
-                ok(skf_fast_nodes_update(
-                    f.model,
-                    f.fast_mesh,
-                    f.frame,
-                    f.scratch,
-                    f.nodes,
-                ));
-                ok(skf_skin_fast(
-                    f.fast_mesh,
-                    f.frame,
-                    f.nodes,
-                    (k % 2) as u32,
-                    4,
-                    0,
-                    n,
-                    &LAYOUT,
-                    vbo.as_mut_ptr(),
-                    vbo.len(),
-                ));
-            }
+            f.pose_and_skin(pose, (k % 2) as u32, 4, 0, n, &mut vbo);
         }
     });
     assert_eq!(count, 0, "the per-frame fast calls allocated {count} times");

@@ -5,6 +5,7 @@
 mod common;
 #[path = "../../runtime/tests/common/counting.rs"]
 mod counting;
+mod support;
 
 use std::ffi::{CString, c_char};
 use std::ptr::null_mut;
@@ -37,14 +38,7 @@ fn per_frame_c_calls_do_not_allocate() {
             for (j, l) in pose.locals.iter().enumerate() {
                 engine[names.len() - 2 - j] = *l;
             }
-            engine
-                .iter()
-                .map(|t| SkfTransform {
-                    translation: t.translation.to_array(),
-                    rotation: t.rotation.to_array(),
-                    scale: t.scale.to_array(),
-                })
-                .collect()
+            engine.iter().map(support::c_transform).collect()
         })
         .collect();
     let layout = SkfVertexLayout {

@@ -131,8 +131,8 @@ fn robot_expressive_capture_agrees_with_gltf_skinning_everywhere() {
     // Every camera sees the robot whole in every test frame, and the oracle is close to the
     // ground truth (DQS + bulges with the same weights), not metres off. The rigid parts (every
     // vertex after the two skins') move rigidly in the ground truth: no flexion bulge on metal.
-    let skinned = r.skinned(0, &r.worlds(&r.locals(&[], 0.0))).len()
-        + r.skinned(1, &r.worlds(&r.locals(&[], 0.0))).len();
+    let rest = r.worlds(&r.locals(&[], 0.0));
+    let skinned = r.skinned(0, &rest).len() + r.skinned(1, &rest).len();
     assert!(skinned < 7214 / 2, "the rigid parts are most of the robot");
     let mut largest_bulge = 0.0f32;
     for &f in &cap.test_frames {
