@@ -311,6 +311,7 @@ fn silhouettes_only(
             laplacian: 0.0,
             skinning: 0.0,
             partwise: 0.0,
+            prior: 0.0,
             ..base.weights
         },
         ..base.clone()

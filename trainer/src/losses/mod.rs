@@ -8,6 +8,7 @@
 pub mod laplacian;
 pub mod lbs;
 pub mod partwise;
+pub mod prior;
 pub mod projection;
 pub mod rendering;
 pub mod silhouette;

@@ -31,6 +31,13 @@ pub struct LossWeights {
     pub skinning: f64,
     /// Part-wise regulariser (mean per rigid skin vertex; off by default, see `skinning`).
     pub partwise: f64,
+    /// Prior on the initial weights during the image losses: `KL(w_init ‖ w)` per vertex
+    /// (nats), the warm start's objective kept on at a small weight. The silhouettes say
+    /// nothing about a vertex they never see (between the legs, in an armpit, a ball centred on
+    /// its joint), yet SkinNet moves it with the vertices they do see, because the network is
+    /// shared; this term keeps such vertices at their initial weights while the image terms
+    /// outweigh it wherever they have something to say.
+    pub prior: f64,
 }
 
 impl Default for LossWeights {
@@ -41,6 +48,7 @@ impl Default for LossWeights {
             laplacian: 6.13e3,
             skinning: 0.0,
             partwise: 0.0,
+            prior: 0.0,
         }
     }
 }
@@ -336,6 +344,7 @@ impl TrainConfig {
             (w.laplacian, "weights.laplacian"),
             (w.skinning, "weights.skinning"),
             (w.partwise, "weights.partwise"),
+            (w.prior, "weights.prior"),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(f);

@@ -141,11 +141,7 @@ const PHASE_QUERY_OFFSET: u64 = 100;
 
 /// `Σ_ij w ln w / v` of dense weights `w`: with the cross-entropy, the KL divergence.
 fn mean_neg_entropy(w: &[f32], v: usize) -> f64 {
-    w.iter()
-        .filter(|&&x| x > 0.0)
-        .map(|&x| f64::from(x) * f64::from(x).ln())
-        .sum::<f64>()
-        / v.max(1) as f64
+    crate::losses::prior::neg_entropy(w) / v.max(1) as f64
 }
 
 fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {

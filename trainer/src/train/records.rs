@@ -21,25 +21,28 @@ pub struct LossRecord {
     pub skinning: f64,
     /// Mean squared deviation per rigid skin vertex.
     pub partwise: f64,
+    /// `KL(w_init ‖ w)` per vertex (nats).
+    pub prior: f64,
 }
 
 impl LossRecord {
     /// CSV header matching [`LossRecord::csv_row`].
     pub const CSV_HEADER: &'static str =
-        "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise";
+        "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise,prior";
 
     /// One CSV row.
     #[must_use]
     pub fn csv_row(&self) -> String {
         format!(
-            "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
+            "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
             self.iteration,
             self.total,
             self.silhouette_boundary,
             self.silhouette_contour,
             self.laplacian,
             self.skinning,
-            self.partwise
+            self.partwise,
+            self.prior
         )
     }
 }

@@ -37,17 +37,7 @@ impl Trainer {
         let init = self.init_at(query.as_ref())?;
         let v = self.data.template.vertex_count();
         let b = frames.len();
-        let cross = (w
-            .clamp(1e-12, 1.0)?
-            .log()?
-            .broadcast_mul(&init)?
-            .sum_all()?
-            / (-((b * v) as f64)))?;
-        let init_entropy = if query.is_some() {
-            mean_neg_entropy(&init.flatten_all()?.to_vec1::<f32>()?, v)
-        } else {
-            self.init_entropy
-        };
+        let (cross, init_entropy) = self.prior_cross_entropy(&w, &init, query.is_some())?;
         timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         let skinning = self.frame_skinning(&frames)?;
         let rest = self.rest_at(query.as_ref())?;
@@ -130,11 +120,11 @@ impl Trainer {
         let (sb_px, sc_px) = (silhouette.get(2)?, silhouette.get(3)?);
         timer.lap(&mut self.profile, KIND, Phase::Silhouette);
         let v = self.data.template.vertex_count() as f64;
+        let init = self.init_at(query.as_ref())?;
         let lap_input = match self.config.laplacian_reference {
             LaplacianReference::Absolute => posed.clone(),
             // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
             LaplacianReference::InitialSkinning => {
-                let init = self.init_at(query.as_ref())?;
                 (&posed - self.initial_posing(&init, &skinning, &rest, b)?)?
             }
         };
@@ -144,12 +134,21 @@ impl Trainer {
         let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
         let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
         let lw = self.config.weights;
+        // Logged at any weight; kept out of the backward pass when it has none.
+        let prior_input = if lw.prior > 0.0 {
+            w.clone()
+        } else {
+            w.detach()
+        };
+        let (prior, init_entropy) =
+            self.prior_cross_entropy(&prior_input, &init, query.is_some())?;
         let terms = [
             (&sb * lw.silhouette_boundary)?,
             (&sc * lw.silhouette_contour)?,
             (&lap * lw.laplacian)?,
             (&skin * lw.skinning)?,
             (&part * lw.partwise)?,
+            (&prior * lw.prior)?,
         ];
         let mut terms = terms.to_vec();
         timer.lap(&mut self.profile, KIND, Phase::Regularisers);
@@ -166,6 +165,7 @@ impl Trainer {
             laplacian: val(&lap)?,
             skinning: val(&skin)?,
             partwise: val(&part)?,
+            prior: val(&prior)? + init_entropy,
         };
         let grads = total.backward()?;
         timer.lap(&mut self.profile, KIND, Phase::Backward);
@@ -176,5 +176,24 @@ impl Trainer {
         timer.lap(&mut self.profile, KIND, Phase::Optimiser);
         self.profile.finish_iteration(KIND);
         Ok(record)
+    }
+
+    /// The prior's cross-entropy ([`crate::losses::prior`]) averaged over the batch's vertices
+    /// (`w` is `[B, V, J]`, `init` `[1, V, J]`), and the initial weights' mean negative entropy:
+    /// their sum is `KL(w_init ‖ w)` per vertex.
+    fn prior_cross_entropy(
+        &self,
+        w: &Tensor,
+        init: &Tensor,
+        at_queries: bool,
+    ) -> Result<(Tensor, f64), TrainError> {
+        let (b, v) = (w.dim(0)?, self.data.template.vertex_count());
+        let cross = (crate::losses::prior::cross_entropy(w, init)? / ((b * v) as f64))?;
+        let init_entropy = if at_queries {
+            mean_neg_entropy(&init.flatten_all()?.to_vec1::<f32>()?, v)
+        } else {
+            self.init_entropy
+        };
+        Ok((cross, init_entropy))
     }
 }

@@ -1025,3 +1025,64 @@ fn the_exported_model_records_the_training_poses_feature_range() {
     let trainer = Trainer::new(data, off, false).unwrap();
     assert_eq!(trainer.skf_model().unwrap().pose_range, None);
 }
+
+#[test]
+fn the_prior_alone_pulls_skinnet_to_the_initial_weights_and_logs_its_kl() {
+    // No warm start, so SkinNet starts away from the initial weights; every other term off.
+    let (data, _) = scene(1);
+    let init = data.init_weights.clone();
+    let joints = data.skeleton.len();
+    let cfg = TrainConfig {
+        iterations: 40,
+        warm_start_iterations: 0,
+        lr_warmup: 0,
+        adam: crate::optim::AdamConfig {
+            lr: 1e-2,
+            ..Default::default()
+        },
+        weights: LossWeights {
+            silhouette_boundary: 0.0,
+            silhouette_contour: 0.0,
+            laplacian: 0.0,
+            prior: 1.0,
+            ..Default::default()
+        },
+        ..config()
+    };
+    // At weight 0 the KL is still logged, and nothing moves.
+    let off = TrainConfig {
+        weights: LossWeights {
+            prior: 0.0,
+            ..cfg.weights
+        },
+        ..cfg.clone()
+    };
+    let mut idle = Trainer::new(data.clone(), off, false).unwrap();
+    let logged_idle = idle.step().unwrap().prior;
+    let mut t = Trainer::new(data, cfg, false).unwrap();
+    // KL(w_init ‖ w) per vertex, in f64 from the weights the step is about to see.
+    let kl = |t: &Trainer| {
+        let w = t.weights(&[0]).unwrap().flatten_all().unwrap();
+        let w = w.to_vec1::<f32>().unwrap();
+        let total: f64 = w
+            .iter()
+            .zip(&init)
+            .filter(|&(_, &p)| p > 0.0)
+            .map(|(&q, &p)| f64::from(p) * (f64::from(p) / f64::from(q.max(1e-12))).ln())
+            .sum();
+        total / (init.len() / joints) as f64
+    };
+    let before = kl(&t);
+    let first = t.step().unwrap().prior;
+    assert!(
+        (first - before).abs() < 1e-4 * before.max(1.0),
+        "{first} vs {before}"
+    );
+    for _ in 1..40 {
+        t.step().unwrap();
+    }
+    let after = kl(&t);
+    assert!(after < 0.2 * before, "KL {before} → {after}");
+    assert!((logged_idle - before).abs() < 1e-4 * before.max(1.0));
+    assert_eq!(idle.step().unwrap().prior, logged_idle);
+}
