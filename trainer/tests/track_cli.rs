@@ -74,3 +74,39 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
         assert!(d < 0.1, "frame {f}: root {d} m off");
     }
 }
+
+#[test]
+fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let (code, _, err) = trainer(&[
+        "synth",
+        "--out",
+        cap.to_str().unwrap(),
+        "--cameras",
+        "2",
+        "--resolution",
+        "32",
+        "--grid",
+        "40",
+        "--vertices",
+        "2500",
+        "--train-frames",
+        "1",
+        "--test-frames",
+        "1",
+        "--keypoints",
+        "--landmarks",
+        "joint-sides",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let capture = load_capture(&cap).unwrap();
+    let map = capture.landmark_map().unwrap().unwrap();
+    assert_eq!(
+        map,
+        skinfield_trainer::track::capture::joint_side_landmark_map(&capture.skeleton)
+    );
+    let detections = capture.keypoints(0, 0, map.keypoints.len()).unwrap();
+    assert_eq!(detections.len(), map.keypoints.len());
+    assert!(detections.iter().filter(|d| d.is_some()).count() > map.keypoints.len() / 2);
+}

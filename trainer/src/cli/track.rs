@@ -13,7 +13,7 @@ use skinfield_formats::capture::{Capture, CaptureWriter, MANIFEST_FILE, load_cap
 use skinfield_trainer::eval::{PreparedSkinning, Skinning};
 use skinfield_trainer::track::TrackOptions;
 use skinfield_trainer::track::capture::{
-    default_landmark_map, mpjpe, track_capture, write_synthetic_keypoints,
+    default_landmark_map, joint_side_landmark_map, mpjpe, track_capture, write_synthetic_keypoints,
 };
 use skinfield_trainer::track::synthetic::DetectionNoise;
 
@@ -56,8 +56,8 @@ pub struct Args {
     pub body_weights: Skinning,
 }
 
-/// Corruption of synthetic detections (`trainer track --synthesize`, `trainer synth
-/// --keypoints`).
+/// The synthetic detector (`trainer track --synthesize`, `trainer synth --keypoints`): the
+/// points it sees and how its detections are corrupted.
 #[derive(ClapArgs, Debug, Clone, Copy)]
 pub struct NoiseArgs {
     /// Synthetic detections: pixel noise (standard deviation per axis).
@@ -72,17 +72,33 @@ pub struct NoiseArgs {
     /// Synthetic detections: seed.
     #[arg(long, default_value_t = 0)]
     pub keypoint_seed: u64,
+    /// Synthetic detections: which points the detector sees.
+    #[arg(long, value_enum, default_value_t = LandmarkSet::Default)]
+    pub landmarks: LandmarkSet,
 }
 
-/// Writes synthetic keypoints (the default landmark map of its skeleton) into `capture`.
-pub fn synthesize_keypoints(capture: &Capture, noise: &NoiseArgs) -> anyhow::Result<()> {
+/// The points a synthetic detector sees.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LandmarkSet {
+    /// OpenPose BODY_25 on the built-in character's joints, otherwise one keypoint per joint.
+    Default,
+    /// One keypoint per joint and one beside each joint, off its bone, which sees the limbs'
+    /// twists.
+    JointSides,
+}
+
+/// Writes synthetic keypoints (the landmark map `args.landmarks` of its skeleton) into `capture`.
+pub fn synthesize_keypoints(capture: &Capture, args: &NoiseArgs) -> anyhow::Result<()> {
     let noise = DetectionNoise {
-        sigma_px: noise.noise_px,
-        drop_rate: noise.drop,
-        swap_rate: noise.swap,
-        seed: noise.keypoint_seed,
+        sigma_px: args.noise_px,
+        drop_rate: args.drop,
+        swap_rate: args.swap,
+        seed: args.keypoint_seed,
     };
-    let map = default_landmark_map(&capture.skeleton);
+    let map = match args.landmarks {
+        LandmarkSet::Default => default_landmark_map(&capture.skeleton),
+        LandmarkSet::JointSides => joint_side_landmark_map(&capture.skeleton),
+    };
     write_synthetic_keypoints(capture, &map, &noise).context("writing synthetic keypoints")?;
     println!(
         "wrote {} detections per image ({}) into {}",

@@ -93,6 +93,70 @@ pub fn default_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
     }
 }
 
+/// The landmark map of a detector that sees, besides every joint, a point beside it: one
+/// keypoint per joint (named as the joint) and one per joint named `{joint}.side`, offset from
+/// the joint perpendicular to its bone by a quarter of the bone's length (the bone to its first
+/// child, or for a leaf the bone from its parent). A leaf, whose bone has no end to see, also
+/// gets `{joint}.tip`, a quarter of the length further along its bone. The side points observe
+/// each limb's twist about its bone, which a keypoint per joint cannot
+/// (docs/experiments/tracking.md), as the surface keypoints of a marker set or a dense
+/// detector do.
+#[must_use]
+pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
+    let local = skeleton.bind_local();
+    let mut keypoints = skeleton.names().to_vec();
+    let mut landmarks: Vec<LandmarkEntry> = skeleton
+        .names()
+        .iter()
+        .map(|n| LandmarkEntry {
+            keypoint: n.clone(),
+            joint: n.clone(),
+            offset: [0.0; 3],
+        })
+        .collect();
+    for (j, name) in skeleton.names().iter().enumerate() {
+        // The bone in the joint's own frame: to the first child, or back to the parent.
+        let leaf = skeleton.children(j).next().is_none();
+        let bone = match skeleton.children(j).next() {
+            Some(c) => local[c].translation,
+            None if skeleton.parents()[j].is_some() => {
+                -(local[j].rotation.inverse() * local[j].translation)
+            }
+            None => continue,
+        };
+        let length = bone.length();
+        if !(length.is_finite() && length > 0.0) {
+            continue;
+        }
+        let along = bone / length;
+        // The joint's local axis least aligned with the bone, made perpendicular to it.
+        let axis = [glam::Vec3::X, glam::Vec3::Y, glam::Vec3::Z]
+            .into_iter()
+            .min_by(|a, b| a.dot(along).abs().total_cmp(&b.dot(along).abs()))
+            .expect("three axes");
+        let side = (axis - along * axis.dot(along)).normalize() * (0.25 * length);
+        let mut add = |suffix: &str, offset: glam::Vec3| {
+            let keypoint = format!("{name}.{suffix}");
+            keypoints.push(keypoint.clone());
+            landmarks.push(LandmarkEntry {
+                keypoint,
+                joint: name.clone(),
+                offset: offset.to_array(),
+            });
+        };
+        add("side", side);
+        if leaf {
+            add("tip", -0.25 * bone);
+        }
+    }
+    LandmarkMapFile {
+        format: "skinfield-landmarks".into(),
+        detector: "joints+sides".into(),
+        keypoints,
+        landmarks,
+    }
+}
+
 /// The tracker's landmarks of a (validated) map, and for each the index of its keypoint in the
 /// detector's output.
 #[must_use]
@@ -487,5 +551,89 @@ mod tests {
             landmarks: Vec::new(),
         };
         assert_eq!(left_right_pairs(&map), vec![(1, 2), (3, 4), (5, 6)]);
+    }
+
+    /// Tracks `capture` from exact detections of `map` (keypoints only) and returns the largest
+    /// difference, over frames and joints, between an entry of a tracked and a true world
+    /// matrix's rotation part.
+    fn worst_rotation_entry(dir: &std::path::Path, map: &LandmarkMapFile) -> f32 {
+        let capture = load_capture(dir).unwrap();
+        write_synthetic_keypoints(&capture, map, &EXACT).unwrap();
+        let capture = load_capture(dir).unwrap();
+        let keypoints_only = TrackOptions {
+            silhouette_weight: 0.0,
+            ..TrackOptions::default()
+        };
+        let tracked = track_capture(&capture, &keypoints_only, None, |_| {}).unwrap();
+        let n = capture.skeleton.len();
+        let (mut got, mut want) = (vec![Mat4::IDENTITY; n], vec![Mat4::IDENTITY; n]);
+        let mut worst = 0.0f32;
+        for (g, w) in tracked.poses.iter().zip(&capture.poses) {
+            capture.skeleton.world_matrices(g, &mut got).unwrap();
+            capture.skeleton.world_matrices(w, &mut want).unwrap();
+            for (a, b) in got.iter().zip(&want) {
+                let d = glam::Mat3::from_mat4(*a) - glam::Mat3::from_mat4(*b);
+                worst = worst.max(d.to_cols_array().iter().fold(0.0, |m, x| m.max(x.abs())));
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn side_keypoints_see_the_twists_that_joint_keypoints_miss() {
+        let dir = tempfile::tempdir().unwrap();
+        let capture = tiny_capture(dir.path());
+        let sides = joint_side_landmark_map(&capture.skeleton);
+        let skeleton = &capture.skeleton;
+        // A keypoint at every joint, and beside every joint with a bone: perpendicular to the
+        // bone, a quarter of its length away; a leaf also a quarter further along its bone.
+        let leaves = (0..skeleton.len())
+            .filter(|&j| skeleton.children(j).next().is_none())
+            .count();
+        assert_eq!(sides.keypoints.len(), sides.landmarks.len());
+        assert_eq!(sides.landmarks.len(), 2 * skeleton.len() + leaves);
+        for l in sides.landmarks.iter().filter(|l| l.keypoint.contains('.')) {
+            let j = skeleton.find(&l.joint).unwrap();
+            let bone = match skeleton.children(j).next() {
+                Some(c) => skeleton.bind_local()[c].translation,
+                None => {
+                    let t = skeleton.bind_local()[j];
+                    -(t.rotation.inverse() * t.translation)
+                }
+            };
+            let offset = glam::Vec3::from_array(l.offset);
+            assert!(
+                (offset.length() - 0.25 * bone.length()).abs() < 1e-5,
+                "{}",
+                l.keypoint
+            );
+            if l.keypoint == format!("{}.side", l.joint) {
+                assert!(
+                    offset.dot(bone).abs() < 1e-5 * bone.length_squared(),
+                    "{}",
+                    l.keypoint
+                );
+            } else {
+                assert_eq!(l.keypoint, format!("{}.tip", l.joint));
+                assert!((offset + 0.25 * bone).length() < 1e-6, "{}", l.keypoint);
+            }
+        }
+        // Exact detections: with the side points every joint's orientation comes back; with
+        // the joints alone (the same map less its side points) the limbs' twists do not.
+        let joints_only = LandmarkMapFile {
+            detector: "joints".into(),
+            keypoints: skeleton.names().to_vec(),
+            landmarks: sides
+                .landmarks
+                .iter()
+                .filter(|l| !l.keypoint.contains('.'))
+                .cloned()
+                .collect(),
+            ..sides.clone()
+        };
+        let with_sides = worst_rotation_entry(dir.path(), &sides);
+        let without = worst_rotation_entry(dir.path(), &joints_only);
+        assert!(with_sides < 1e-3, "with side points: {with_sides}");
+        assert!(without > 0.05, "joints only: {without}");
     }
 }
