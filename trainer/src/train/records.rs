@@ -90,6 +90,10 @@ pub(super) fn reopen_log(
 
 /// Recreates the CSV log `path` with `header` and the rows of the old file for which `keep`
 /// holds (none when there is no old file), and returns it open for appending rows.
+///
+/// A run folder written by an earlier version may have other columns (a term added, one
+/// dropped): its rows are rewritten under `header` by column name, with an empty field where
+/// the old file had no such column, so every row of the log has the header's columns.
 pub(crate) fn reopen_log_keeping(
     path: &Path,
     header: &str,
@@ -101,9 +105,59 @@ pub(crate) fn reopen_log_keeping(
     };
     let mut kept = vec![header.to_string()];
     if let Ok(text) = std::fs::read_to_string(path) {
-        kept.extend(text.lines().skip(1).filter(|l| keep(l)).map(str::to_string));
+        let mut lines = text.lines();
+        let old_header = lines.next().unwrap_or_default();
+        let rows = lines.filter(|l| keep(l));
+        if old_header == header {
+            kept.extend(rows.map(str::to_string));
+        } else {
+            let old: Vec<&str> = old_header.split(',').collect();
+            let columns: Vec<Option<usize>> = header
+                .split(',')
+                .map(|name| old.iter().position(|o| *o == name))
+                .collect();
+            kept.extend(rows.map(|row| {
+                let fields: Vec<&str> = row.split(',').collect();
+                columns
+                    .iter()
+                    .map(|c| c.and_then(|i| fields.get(i).copied()).unwrap_or(""))
+                    .collect::<Vec<_>>()
+                    .join(",")
+            }));
+        }
     }
     let mut file = std::fs::File::create(path).map_err(io)?;
     writeln!(file, "{}", kept.join("\n")).map_err(io)?;
     Ok(file)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_log_with_other_columns_is_reopened_under_the_new_header() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("warm_start.csv");
+        // An earlier version's columns: one dropped since, one not yet there.
+        std::fs::write(
+            &path,
+            "iteration,kl,position_cm2,position_relative\n1,0.5,9,0.01\n2,0.4,8,0.02\n3,0.3,7,0.03\n",
+        )
+        .unwrap();
+        let mut file = reopen_log(&path, "iteration,kl,position_relative,extra", 2).unwrap();
+        writeln!(file, "3,0.2,0.04,1").unwrap();
+        drop(file);
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            "iteration,kl,position_relative,extra\n1,0.5,0.01,\n2,0.4,0.02,\n3,0.2,0.04,1\n"
+        );
+        // The same header keeps its rows as they are.
+        let file = reopen_log(&path, "iteration,kl,position_relative,extra", 1).unwrap();
+        drop(file);
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            "iteration,kl,position_relative,extra\n1,0.5,0.01,\n"
+        );
+    }
 }
