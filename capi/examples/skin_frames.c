@@ -5,7 +5,7 @@
  * buffer, by the exact path (SkinNet at every vertex) and by the fast path (SkinNet at 128
  * nodes, the other vertices interpolated). The inputs and the Rust runtime's answers come from
  * the `fixture` example; the program exits 0 when every position and normal of both paths
- * agrees with Rust to 1e-6.
+ * agrees with Rust to 1e-6 and the last frame's top-k influences are well formed.
  *
  *   skin_frames MODEL.skf FIXTURE_DIR
  */
@@ -185,6 +185,29 @@ int main(int argc, char **argv) {
     }
   }
 
+  /* The last frame as each vertex's 4 strongest joints (engine order) and unorm8 weights, for
+   * an engine that skins on its own: every vertex's weights sum to exactly 255. */
+  uint8_t *top_joints = malloc(4 * (size_t)vertices), *top_weights = malloc(4 * (size_t)vertices);
+  if (!top_joints || !top_weights) {
+    fprintf(stderr, "out of memory\n");
+    return 1;
+  }
+  check(skf_fast_top_k(model, fast_mesh, frame, nodes, 4, 0, (size_t)vertices,
+                       SKF_TOP_K_INDEX_U8, top_joints, 4 * (size_t)vertices,
+                       SKF_TOP_K_WEIGHT_UNORM8, top_weights, 4 * (size_t)vertices),
+        "skf_fast_top_k");
+  size_t top_k_bad = 0;
+  for (size_t v = 0; v < vertices; v++) {
+    unsigned sum = 0;
+    for (int k = 0; k < 4; k++) {
+      sum += top_weights[4 * v + k];
+      top_k_bad += top_joints[4 * v + k] >= joints;
+    }
+    top_k_bad += sum != 255;
+  }
+  free(top_joints);
+  free(top_weights);
+
   /* A bad argument is a status and a message, not a crash. */
   SkfStatus bad = skf_skin(model, mesh, frame, scratch, 7, 0, (size_t)vertices, &layout,
                            (uint8_t *)vbo, buffer_len);
@@ -195,6 +218,9 @@ int main(int argc, char **argv) {
   printf("C ABI fast path: %zu nodes, %llu triangles: worst |C - Rust| = %.3g (tolerance %.0e); "
          "largest position difference from the exact path %.3g (model units)\n",
          node_count, (unsigned long long)triangle_count, worst_fast, TOLERANCE, fast_from_exact);
+  printf("C ABI top-k: 4 joints per vertex (u8, unorm8), %zu vertices with a weight sum other "
+         "than 255 or a joint outside the engine's %zu\n",
+         top_k_bad, joints);
 
   skf_fast_nodes_free(nodes);
   skf_fast_mesh_free(fast_mesh);
@@ -211,6 +237,6 @@ int main(int argc, char **argv) {
   free(parents);
   free(names);
   free(engine);
-  int agrees = worst <= TOLERANCE && worst_fast <= TOLERANCE;
+  int agrees = worst <= TOLERANCE && worst_fast <= TOLERANCE && top_k_bad == 0;
   return agrees && bad == SKF_STATUS_INVALID_ARGUMENT ? 0 : 1;
 }

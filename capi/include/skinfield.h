@@ -23,6 +23,31 @@
 #define SKF_METHOD_DQS 1
 
 /*
+ Joint indices as one byte each (skeletons of up to 256 joints).
+ */
+#define SKF_TOP_K_INDEX_U8 0
+
+/*
+ Joint indices as two bytes each.
+ */
+#define SKF_TOP_K_INDEX_U16 1
+
+/*
+ Weights as unorm8 (255 is one).
+ */
+#define SKF_TOP_K_WEIGHT_UNORM8 0
+
+/*
+ Weights as unorm16 (65535 is one).
+ */
+#define SKF_TOP_K_WEIGHT_UNORM16 1
+
+/*
+ Weights as f32 (multiples of 2⁻²⁴, summing exactly to 1.0).
+ */
+#define SKF_TOP_K_WEIGHT_F32 2
+
+/*
  What a call returned. `SKF_STATUS_OK` is zero; on anything else
  [`skf_last_error`] names the function and the argument or field that was wrong.
  */
@@ -428,6 +453,34 @@ enum SkfStatus skf_skin(const struct SkfModel *model,
  thread. Never null.
  */
 const char *skf_last_error(void);
+
+/*
+ Writes the `influences` (1 to 8) strongest joints of vertices `first_vertex ..
+ first_vertex + count` of `fast_mesh`, strongest first, with the fast path's weights for the
+ frame's pose (`nodes` updated for it by `skf_fast_nodes_update`): `influences` indices per
+ vertex into `out_indices` (format `index_format`, `SKF_TOP_K_INDEX_*`, holding
+ `out_indices_len` elements) and as many weights into `out_weights` (`SKF_TOP_K_WEIGHT_*`,
+ `out_weights_len` elements); both must hold at least `count × influences` elements, aligned
+ for their element type. Indices are the engine's joints when `model` is mapped, else the
+ model's. Does not allocate; ranges of one frame may be written concurrently.
+
+ # Safety
+ All handles must be live; each output must point to its stated number of writable elements
+ of its format, which no other thread writes.
+ */
+enum SkfStatus skf_fast_top_k(const struct SkfModel *model,
+                              const struct SkfFastMesh *fast_mesh,
+                              const struct SkfFrame *frame,
+                              const struct SkfFastNodes *nodes,
+                              size_t influences,
+                              size_t first_vertex,
+                              size_t count,
+                              uint32_t index_format,
+                              void *out_indices,
+                              size_t out_indices_len,
+                              uint32_t weight_format,
+                              void *out_weights,
+                              size_t out_weights_len);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -56,7 +56,7 @@ pub extern "C" fn skf_fast_options_default() -> SkfFastOptions {
 /// A mesh bound for the fast path (opaque), with the rest normals and tangents of the mesh it
 /// was bound from.
 pub struct SkfFastMesh {
-    fast: FastMesh,
+    pub(crate) fast: FastMesh,
     normals: Option<Vec<Vec3>>,
     tangents: Option<Vec<Vec4>>,
 }
@@ -64,7 +64,7 @@ pub struct SkfFastMesh {
 /// SkinNet's weights at a fast mesh's nodes for one posed frame (opaque; one per mesh per
 /// frame in flight).
 pub struct SkfFastNodes {
-    nodes: FastFrame,
+    pub(crate) nodes: FastFrame,
 }
 
 /// Binds `mesh` (bound to `model` by `skf_mesh_bind`) for the fast path: `triangles` holds

@@ -19,7 +19,8 @@
 //!
 //! The fast path (SkinNet at a few nodes per frame, the other vertices interpolated) adds a
 //! bind ([`skf_fast_mesh_bind`]) and a per-frame node update ([`skf_fast_nodes_update`]) before
-//! [`skf_skin_fast`].
+//! [`skf_skin_fast`], or [`skf_fast_top_k`] for an engine that skins with each vertex's
+//! strongest joints itself.
 //!
 //! Contracts:
 //! - Every function returns an [`SkfStatus`]; on failure [`skf_last_error`] gives a message
@@ -27,8 +28,8 @@
 //!   lengths, NaN transforms, truncated files, handles of another model) are refused, never
 //!   undefined behaviour as far as a pointer can be checked (null, alignment, size).
 //! - No panic unwinds into C: a bug returns `SKF_STATUS_INTERNAL`.
-//! - [`skf_frame_set_pose`], [`skf_skin`], [`skf_fast_nodes_update`] and [`skf_skin_fast`] do
-//!   not allocate (the error path writes its message, which does).
+//! - [`skf_frame_set_pose`], [`skf_skin`], [`skf_fast_nodes_update`], [`skf_skin_fast`] and
+//!   [`skf_fast_top_k`] do not allocate (the error path writes its message, which does).
 //! - Handles are not thread-safe to mutate; models, meshes and posed frames may be read by any
 //!   number of threads, each skinning with its own scratch.
 //!
@@ -42,6 +43,7 @@ mod model;
 mod ptr;
 mod skin;
 mod status;
+mod top_k;
 
 pub use fast::{
     SkfFastMesh, SkfFastNodes, SkfFastOptions, skf_fast_mesh_bind, skf_fast_mesh_free,
@@ -59,3 +61,7 @@ pub use skin::{
     skf_scratch_new, skf_skin, skf_vertex_buffer_len,
 };
 pub use status::{SkfStatus, skf_last_error};
+pub use top_k::{
+    SKF_TOP_K_INDEX_U8, SKF_TOP_K_INDEX_U16, SKF_TOP_K_WEIGHT_F32, SKF_TOP_K_WEIGHT_UNORM8,
+    SKF_TOP_K_WEIGHT_UNORM16, skf_fast_top_k,
+};

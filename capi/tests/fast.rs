@@ -1,7 +1,8 @@
 //! The fast path through the C ABI: results equal the Rust fast path's bit for bit (LBS and DQS,
-//! whole mesh and a range inside it, triangle mesh and point cloud), the interleaved writes
-//! leave other bytes alone, the per-frame calls do not allocate, and every bad argument returns
-//! its status with a message naming the function and the field.
+//! whole mesh and a range inside it, triangle mesh and point cloud; the top-k influences in
+//! every format, in the model's and in an engine's joint order), the interleaved writes leave
+//! other bytes alone, the per-frame calls do not allocate, and every bad argument returns its
+//! status with a message naming the function and the field.
 
 #[path = "../../runtime/tests/common/mod.rs"]
 mod common;
@@ -15,6 +16,7 @@ use glam::{Vec3, Vec4};
 use skinfield::*;
 use skinfield_runtime::{
     FastFrame, FastMesh, FastOptions, FastSkinJob, FrameState, Method, Scratch, SkinNetModel,
+    TopKIndices, TopKJob, TopKWeights,
 };
 use support::{c_pose, fails, ok};
 
@@ -32,6 +34,8 @@ struct Fast {
     nodes: *mut SkfFastNodes,
     frame: *mut SkfFrame,
     scratch: *mut SkfScratch,
+    /// Engine joints before the model's when the model is mapped ([`setup_engine`]).
+    helpers: usize,
 }
 
 impl Drop for Fast {
@@ -98,7 +102,23 @@ const OPTIONS: SkfFastOptions = SkfFastOptions {
     base_influences: 4,
 };
 
+/// [`OPTIONS`] for the Rust fast path.
+fn rust_options() -> FastOptions {
+    FastOptions {
+        nodes: OPTIONS.nodes,
+        neighbours: OPTIONS.neighbours,
+        base_influences: OPTIONS.base_influences,
+        ..FastOptions::DEFAULT
+    }
+}
+
 fn setup(seed: u64, options: &SkfFastOptions, triangles: bool) -> Fast {
+    setup_engine(seed, options, triangles, 0)
+}
+
+/// [`setup`], the model mapped to an engine skeleton when `helpers` > 0: `helpers` joints of
+/// the engine's own (`helper_0`, …) first, then the model's joints in reverse order.
+fn setup_engine(seed: u64, options: &SkfFastOptions, triangles: bool, helpers: usize) -> Fast {
     let bytes = common::vinecs_bytes(7, seed);
     let (positions, normals, tris) = common::ellipsoid(10, 14);
     let (_, tangents) = common::random_frames(positions.len(), &mut common::rng(seed + 1));
@@ -114,6 +134,7 @@ fn setup(seed: u64, options: &SkfFastOptions, triangles: bool) -> Fast {
         nodes: null_mut(),
         frame: null_mut(),
         scratch: null_mut(),
+        helpers,
     };
     // SAFETY: every pointer below points to live data of the stated length.
     unsafe {
@@ -122,6 +143,21 @@ fn setup(seed: u64, options: &SkfFastOptions, triangles: bool) -> Fast {
             f.bytes.len(),
             &mut f.model,
         ));
+        if helpers > 0 {
+            let net = SkinNetModel::from_skf(&f.bytes).unwrap();
+            let names: Vec<std::ffi::CString> = (0..helpers)
+                .map(|h| format!("helper_{h}"))
+                .chain(net.skeleton().names().iter().rev().cloned())
+                .map(|n| std::ffi::CString::new(n).unwrap())
+                .collect();
+            let ptrs: Vec<*const std::ffi::c_char> = names.iter().map(|n| n.as_ptr()).collect();
+            ok(skf_model_map_joints(
+                f.model,
+                ptrs.as_ptr(),
+                ptrs.len(),
+                null(),
+            ));
+        }
         ok(skf_mesh_bind(
             f.model,
             f.positions.as_ptr().cast(),
@@ -168,13 +204,7 @@ fn the_c_fast_path_skins_exactly_as_the_rust_fast_path() {
     for triangles in [true, false] {
         let f = setup(21, &OPTIONS, triangles);
         let net = SkinNetModel::from_skf(&f.bytes).unwrap();
-        let options = FastOptions {
-            nodes: OPTIONS.nodes,
-            neighbours: OPTIONS.neighbours,
-            base_influences: OPTIONS.base_influences,
-            ..FastOptions::DEFAULT
-        };
-        let mesh = FastMesh::bind(&net, &f.positions, &f.triangles, &options).unwrap();
+        let mesh = FastMesh::bind(&net, &f.positions, &f.triangles, &rust_options()).unwrap();
         let mut nodes = FastFrame::new(&mesh);
         let mut frame = FrameState::new(&net);
         let mut scratch = Scratch::new(&net);
@@ -244,13 +274,33 @@ fn per_frame_fast_calls_do_not_allocate() {
     let n = f.positions.len();
     // SAFETY: a valid layout pointer.
     let mut vbo = vec![0u8; unsafe { skf_vertex_buffer_len(&LAYOUT, n) }];
+    let (mut joints, mut weights) = (vec![0u16; 4 * n], vec![0u16; 4 * n]);
     let count = counting::count_allocations(|| {
         for (k, pose) in poses.iter().enumerate() {
             f.pose_and_skin(pose, (k % 2) as u32, 4, 0, n, &mut vbo);
+            // SAFETY: live handles, buffers of 4n elements.
+            ok(unsafe {
+                skf_fast_top_k(
+                    f.model,
+                    f.fast_mesh,
+                    f.frame,
+                    f.nodes,
+                    4,
+                    0,
+                    n,
+                    SKF_TOP_K_INDEX_U16,
+                    joints.as_mut_ptr().cast(),
+                    joints.len(),
+                    SKF_TOP_K_WEIGHT_UNORM16,
+                    weights.as_mut_ptr().cast(),
+                    weights.len(),
+                )
+            });
         }
     });
     assert_eq!(count, 0, "the per-frame fast calls allocated {count} times");
     assert!(vbo.iter().any(|&b| b != 0));
+    assert!(weights.iter().any(|&w| w != 0));
 }
 
 #[test]
@@ -529,5 +579,463 @@ fn every_bad_fast_path_argument_is_a_status_naming_it() {
         // Null handles are ignored by the free functions.
         skf_fast_mesh_free(null_mut());
         skf_fast_nodes_free(null_mut());
+    }
+}
+
+/// The engine's transforms for a model pose in `Fast::helpers` + reversed model order.
+fn engine_locals(f: &Fast, model_locals: &[SkfTransform]) -> Vec<SkfTransform> {
+    let j = model_locals.len();
+    let identity = support::c_transform(&skinfield_formats::Transform::IDENTITY);
+    let mut out = vec![identity; f.helpers + j];
+    for (m, t) in model_locals.iter().enumerate() {
+        out[f.helpers + j - 1 - m] = *t;
+    }
+    out
+}
+
+#[test]
+fn the_c_top_k_influences_equal_the_rust_ones_in_the_engines_joint_order() {
+    for helpers in [0, 3] {
+        let f = setup_engine(51, &OPTIONS, true, helpers);
+        let net = SkinNetModel::from_skf(&f.bytes).unwrap();
+        let j = net.joint_count();
+        let engine_of = |m: usize| if helpers == 0 { m } else { helpers + j - 1 - m };
+        let mesh = FastMesh::bind(&net, &f.positions, &f.triangles, &rust_options()).unwrap();
+        let mut nodes = FastFrame::new(&mesh);
+        let mut frame = FrameState::new(&net);
+        let mut scratch = Scratch::new(&net);
+        let pose = common::random_pose(net.skeleton(), &mut common::rng(52), 0.6);
+        frame.set_pose(&net, &pose).unwrap();
+        nodes.update(&net, &mesh, &frame, &mut scratch).unwrap();
+        let model_locals = c_pose(&pose);
+        let locals = if helpers == 0 {
+            model_locals
+        } else {
+            engine_locals(&f, &model_locals)
+        };
+        // SAFETY: live handles, arrays of the stated lengths.
+        unsafe {
+            ok(skf_frame_set_pose(
+                f.frame,
+                f.model,
+                locals.as_ptr(),
+                locals.len(),
+            ));
+            ok(skf_fast_nodes_update(
+                f.model,
+                f.fast_mesh,
+                f.frame,
+                f.scratch,
+                f.nodes,
+            ));
+        }
+        let (k, first, count) = (4, 11, 70);
+        let len = k * count;
+        let c_top_k = |index_format, indices: *mut u8, weight_format, weights: *mut u8| {
+            // SAFETY: live handles; each buffer holds `len` elements of its format.
+            ok(unsafe {
+                skf_fast_top_k(
+                    f.model,
+                    f.fast_mesh,
+                    f.frame,
+                    f.nodes,
+                    k,
+                    first,
+                    count,
+                    index_format,
+                    indices.cast(),
+                    len,
+                    weight_format,
+                    weights.cast(),
+                    len,
+                )
+            });
+        };
+        let rust_top_k = |indices: TopKIndices<'_>, weights: TopKWeights<'_>| {
+            TopKJob {
+                mesh: &mesh,
+                frame: &frame,
+                nodes: &nodes,
+                influences: k,
+                first_vertex: first,
+                out_indices: indices,
+                out_weights: weights,
+            }
+            .run()
+            .unwrap();
+        };
+        let what = format!("{helpers} helper joints");
+        // u8 indices, unorm8 weights.
+        let (mut ri, mut rw) = (vec![0u8; len], vec![0u8; len]);
+        rust_top_k(TopKIndices::U8(&mut ri), TopKWeights::Unorm8(&mut rw));
+        let (mut ci, mut cw) = (vec![0xEEu8; len], vec![0xEEu8; len]);
+        c_top_k(
+            SKF_TOP_K_INDEX_U8,
+            ci.as_mut_ptr(),
+            SKF_TOP_K_WEIGHT_UNORM8,
+            cw.as_mut_ptr(),
+        );
+        assert_eq!(cw, rw, "{what}");
+        let mapped: Vec<u8> = ri.iter().map(|&m| engine_of(m.into()) as u8).collect();
+        assert_eq!(ci, mapped, "{what}");
+        // u16 indices, unorm16 and f32 weights.
+        let mut ri = vec![0u16; len];
+        let mut rw16 = vec![0u16; len];
+        rust_top_k(TopKIndices::U16(&mut ri), TopKWeights::Unorm16(&mut rw16));
+        let mapped: Vec<u16> = ri.iter().map(|&m| engine_of(m.into()) as u16).collect();
+        let (mut ci, mut cw16) = (vec![0xEEEEu16; len], vec![0xEEEEu16; len]);
+        c_top_k(
+            SKF_TOP_K_INDEX_U16,
+            ci.as_mut_ptr().cast(),
+            SKF_TOP_K_WEIGHT_UNORM16,
+            cw16.as_mut_ptr().cast(),
+        );
+        assert_eq!((&ci, &cw16), (&mapped, &rw16), "{what}");
+        let mut rw32 = vec![0f32; len];
+        rust_top_k(TopKIndices::U16(&mut ri), TopKWeights::F32(&mut rw32));
+        let mut cw32 = vec![-1f32; len];
+        c_top_k(
+            SKF_TOP_K_INDEX_U16,
+            ci.as_mut_ptr().cast(),
+            SKF_TOP_K_WEIGHT_F32,
+            cw32.as_mut_ptr().cast(),
+        );
+        assert_eq!(cw32, rw32, "{what}");
+        // Strongest first and summing to one, exactly, in every format.
+        for v in 0..count {
+            let w = &cw32[v * k..(v + 1) * k];
+            assert_eq!(w.iter().sum::<f32>(), 1.0, "{what}, vertex {v}");
+            assert!(w.windows(2).all(|p| p[0] >= p[1]), "{what}, vertex {v}");
+            let s16: u32 = cw16[v * k..(v + 1) * k].iter().map(|&x| u32::from(x)).sum();
+            assert_eq!(s16, 65535, "{what}, vertex {v}");
+        }
+    }
+}
+
+#[test]
+fn every_bad_top_k_argument_is_a_status_naming_it() {
+    use SkfStatus::{InvalidArgument as Invalid, NullPointer as Null};
+    let f = setup(61, &OPTIONS, true);
+    let other = setup(62, &OPTIONS, true);
+    let net = SkinNetModel::from_skf(&f.bytes).unwrap();
+    let pose = c_pose(&common::random_pose(
+        net.skeleton(),
+        &mut common::rng(63),
+        0.5,
+    ));
+    let n = f.positions.len();
+    let (k, len) = (4, 4 * n);
+    let mut indices = vec![0u16; len + 1];
+    let mut weights = vec![0f32; len + 1];
+    let (ip, wp): (*mut u16, *mut f32) = (indices.as_mut_ptr(), weights.as_mut_ptr());
+    // SAFETY: every non-null pointer points to live data of at least the stated length; the
+    // null and misaligned ones are what is tested.
+    unsafe {
+        let top_k = |model,
+                     fast_mesh,
+                     frame,
+                     nodes,
+                     influences,
+                     first,
+                     count,
+                     formats: (u32, u32),
+                     i: *mut u8,
+                     il,
+                     w: *mut u8,
+                     wl| {
+            skf_fast_top_k(
+                model,
+                fast_mesh,
+                frame,
+                nodes,
+                influences,
+                first,
+                count,
+                formats.0,
+                i.cast(),
+                il,
+                formats.1,
+                w.cast(),
+                wl,
+            )
+        };
+        let u16_f32 = (SKF_TOP_K_INDEX_U16, SKF_TOP_K_WEIGHT_F32);
+        let (i, w) = (ip.cast::<u8>(), wp.cast::<u8>());
+        ok(skf_frame_set_pose(
+            f.frame,
+            f.model,
+            pose.as_ptr(),
+            pose.len(),
+        ));
+        // Posed, nodes not updated yet.
+        fails(
+            top_k(
+                f.model,
+                f.fast_mesh,
+                f.frame,
+                f.nodes,
+                k,
+                0,
+                n,
+                u16_f32,
+                i,
+                len,
+                w,
+                len,
+            ),
+            Invalid,
+            &["skf_fast_top_k", "nodes", "another pose"],
+        );
+        ok(skf_fast_nodes_update(
+            f.model,
+            f.fast_mesh,
+            f.frame,
+            f.scratch,
+            f.nodes,
+        ));
+        ok(top_k(
+            f.model,
+            f.fast_mesh,
+            f.frame,
+            f.nodes,
+            k,
+            0,
+            n,
+            u16_f32,
+            i,
+            len,
+            w,
+            len,
+        ));
+        let (model, fast_mesh, frame, nodes) = (
+            f.model.cast_const(),
+            f.fast_mesh.cast_const(),
+            f.frame.cast_const(),
+            f.nodes.cast_const(),
+        );
+        for (args, status, words) in [
+            ((null(), fast_mesh, frame, nodes), Null, &["model"][..]),
+            ((model, null(), frame, nodes), Null, &["fast_mesh"]),
+            ((model, fast_mesh, null(), nodes), Null, &["frame"]),
+            ((model, fast_mesh, frame, null()), Null, &["nodes"]),
+            (
+                (other.model.cast_const(), fast_mesh, frame, nodes),
+                Invalid,
+                &["model", "frame"],
+            ),
+            (
+                (model, other.fast_mesh.cast_const(), frame, nodes),
+                Invalid,
+                &["nodes"],
+            ),
+            (
+                (model, fast_mesh, other.frame.cast_const(), nodes),
+                Invalid,
+                &["model", "frame"],
+            ),
+            (
+                (model, fast_mesh, frame, other.nodes.cast_const()),
+                Invalid,
+                &["nodes"],
+            ),
+        ] {
+            let (m, fm, fr, no) = args;
+            fails(
+                top_k(m, fm, fr, no, k, 0, n, u16_f32, i, len, w, len),
+                status,
+                &[&["skf_fast_top_k"][..], words].concat(),
+            );
+        }
+        for (influences, first, count, formats, i, il, w, wl, status, words) in [
+            (
+                0,
+                0,
+                n,
+                u16_f32,
+                i,
+                len,
+                w,
+                len,
+                Invalid,
+                &["influences"][..],
+            ),
+            (9, 0, n, u16_f32, i, len, w, len, Invalid, &["influences"]),
+            (
+                k,
+                0,
+                usize::MAX,
+                u16_f32,
+                i,
+                len,
+                w,
+                len,
+                Invalid,
+                &["count"],
+            ),
+            (
+                k,
+                0,
+                n,
+                u16_f32,
+                i,
+                len - 1,
+                w,
+                len,
+                Invalid,
+                &["out_indices_len"],
+            ),
+            (
+                k,
+                0,
+                n,
+                u16_f32,
+                i,
+                len,
+                w,
+                len - 1,
+                Invalid,
+                &["out_weights_len"],
+            ),
+            (k, 1, n, u16_f32, i, len, w, len, Invalid, &["range"]),
+            (
+                k,
+                0,
+                n,
+                (7, SKF_TOP_K_WEIGHT_F32),
+                i,
+                len,
+                w,
+                len,
+                Invalid,
+                &["index_format"],
+            ),
+            (
+                k,
+                0,
+                n,
+                (SKF_TOP_K_INDEX_U16, 7),
+                i,
+                len,
+                w,
+                len,
+                Invalid,
+                &["weight_format"],
+            ),
+            (
+                k,
+                0,
+                n,
+                u16_f32,
+                null_mut(),
+                len,
+                w,
+                len,
+                Null,
+                &["out_indices"],
+            ),
+            (
+                k,
+                0,
+                n,
+                u16_f32,
+                i,
+                len,
+                null_mut(),
+                len,
+                Null,
+                &["out_weights"],
+            ),
+            (
+                k,
+                0,
+                n,
+                u16_f32,
+                i.add(1),
+                len,
+                w,
+                len,
+                Invalid,
+                &["out_indices", "aligned"],
+            ),
+            (
+                k,
+                0,
+                n,
+                u16_f32,
+                i,
+                len,
+                w.add(2),
+                len,
+                Invalid,
+                &["out_weights", "aligned"],
+            ),
+        ] {
+            fails(
+                top_k(
+                    model, fast_mesh, frame, nodes, influences, first, count, formats, i, il, w, wl,
+                ),
+                status,
+                &[&["skf_fast_top_k"][..], words].concat(),
+            );
+        }
+    }
+    // More engine joints than a byte can index.
+    let wide = setup_engine(64, &OPTIONS, true, 300);
+    let locals = engine_locals(&wide, &pose);
+    // SAFETY: live handles, arrays of the stated lengths.
+    unsafe {
+        ok(skf_frame_set_pose(
+            wide.frame,
+            wide.model,
+            locals.as_ptr(),
+            locals.len(),
+        ));
+        ok(skf_fast_nodes_update(
+            wide.model,
+            wide.fast_mesh,
+            wide.frame,
+            wide.scratch,
+            wide.nodes,
+        ));
+        let mut bytes = vec![0u8; len];
+        fails(
+            skf_fast_top_k(
+                wide.model,
+                wide.fast_mesh,
+                wide.frame,
+                wide.nodes,
+                k,
+                0,
+                n,
+                SKF_TOP_K_INDEX_U8,
+                bytes.as_mut_ptr().cast(),
+                len,
+                SKF_TOP_K_WEIGHT_F32,
+                wp.cast(),
+                len,
+            ),
+            Invalid,
+            &[
+                "skf_fast_top_k",
+                "index_format",
+                &(300 + net.joint_count()).to_string(),
+            ],
+        );
+        ok(skf_fast_top_k(
+            wide.model,
+            wide.fast_mesh,
+            wide.frame,
+            wide.nodes,
+            k,
+            0,
+            n,
+            SKF_TOP_K_INDEX_U16,
+            ip.cast(),
+            len,
+            SKF_TOP_K_WEIGHT_F32,
+            wp.cast(),
+            len,
+        ));
+        assert!(indices[..len].iter().all(|&e| usize::from(e) >= 300));
     }
 }

@@ -222,6 +222,13 @@ impl FrameState {
         self.ready
     }
 
+    /// Whether this frame state was made for `model` (by [`FrameState::new`]); another model's
+    /// jobs refuse it.
+    #[must_use]
+    pub fn is_for<W: AsRef<[f32]>>(&self, model: &SkinNet<W>) -> bool {
+        self.model_id == model.id()
+    }
+
     pub(crate) fn model_id(&self) -> u64 {
         self.model_id
     }

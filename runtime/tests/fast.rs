@@ -770,6 +770,8 @@ fn every_invalid_configuration_is_refused_by_name() {
         fresh.update(&f.model, &mesh, &other.frame, &mut scratch),
         Err(RuntimeError::Mismatch { field: "frame" })
     );
+    assert!(f.frame.is_for(&f.model) && other.frame.is_for(&other.model));
+    assert!(!other.frame.is_for(&f.model) && !f.frame.is_for(&other.model));
     assert_eq!(
         fresh.update(&f.model, &mesh, &FrameState::new(&f.model), &mut scratch),
         Err(RuntimeError::NoPose)
