@@ -400,6 +400,30 @@ enum SkfStatus skf_model_map_joints(struct SkfModel *model,
                                     const int32_t *parents);
 
 /*
+ The transform from the engine's bind space (where its mesh's rest positions live) to the
+ model's canonical space (where `skf_mesh_bind` wants them), from the engine's inverse bind
+ matrices: `engine_inverse_binds` holds `count` 4×4 matrices, 16 floats each, column-major
+ as glTF stores them, in the engine's joint order once the model is mapped (else the
+ model's). Importers and trainers may re-express the bind space (an armature that scales or
+ turns the character), so an engine binds `M · p`, not `p`. `out_matrix` receives `M` (16
+ floats, column-major); `out_normal_matrix` (nullable) the inverse transpose of its linear
+ part (9 floats, column-major) for the normals, renormalised after it (tangents take `M`'s
+ linear part). Refused, naming the joint, when some joint's bind pose differs from the
+ model's by more than `tolerance` (e.g. 1e-3) relative to the matrices' size after the
+ alignment: positions alone cannot fix that.
+
+ # Safety
+ `model` must be live; `engine_inverse_binds` must point to `16 × count` floats;
+ `out_matrix` to 16 writable floats and `out_normal_matrix`, if not null, to 9.
+ */
+enum SkfStatus skf_model_bind_space(const struct SkfModel *model,
+                                    const float *engine_inverse_binds,
+                                    size_t count,
+                                    float tolerance,
+                                    float *out_matrix,
+                                    float *out_normal_matrix);
+
+/*
  Makes scratch memory for `model`'s network. Release with [`skf_scratch_free`].
 
  # Safety

@@ -53,8 +53,8 @@ pub use fast::{
 pub use frame::{SkfFrame, SkfTransform, skf_frame_free, skf_frame_new, skf_frame_set_pose};
 pub use mesh::{SkfMesh, skf_mesh_bind, skf_mesh_free, skf_mesh_vertex_count};
 pub use model::{
-    SkfModel, skf_model_free, skf_model_joint_count, skf_model_joint_name, skf_model_load,
-    skf_model_load_file, skf_model_map_joints,
+    SkfModel, skf_model_bind_space, skf_model_free, skf_model_joint_count, skf_model_joint_name,
+    skf_model_load, skf_model_load_file, skf_model_map_joints,
 };
 pub use skin::{
     SKF_ABSENT, SKF_METHOD_DQS, SKF_METHOD_LBS, SkfScratch, SkfVertexLayout, skf_scratch_free,

@@ -4,7 +4,7 @@
 use std::ffi::{CString, c_char};
 use std::path::Path;
 
-use skinfield_runtime::{JointMap, RuntimeError, SkinNetModel};
+use skinfield_runtime::{JointMap, Mat4, RuntimeError, SkinNetModel};
 use skinfield_runtime::{SkfFileError, read_skf_file};
 
 use crate::ptr;
@@ -209,6 +209,72 @@ pub unsafe extern "C" fn skf_model_map_joints(
                 .map_err(Failure::invalid)?;
         }
         model.map = Some(map);
+        Ok(())
+    })
+}
+
+/// The transform from the engine's bind space (where its mesh's rest positions live) to the
+/// model's canonical space (where `skf_mesh_bind` wants them), from the engine's inverse bind
+/// matrices: `engine_inverse_binds` holds `count` 4×4 matrices, 16 floats each, column-major
+/// as glTF stores them, in the engine's joint order once the model is mapped (else the
+/// model's). Importers and trainers may re-express the bind space (an armature that scales or
+/// turns the character), so an engine binds `M · p`, not `p`. `out_matrix` receives `M` (16
+/// floats, column-major); `out_normal_matrix` (nullable) the inverse transpose of its linear
+/// part (9 floats, column-major) for the normals, renormalised after it (tangents take `M`'s
+/// linear part). Refused, naming the joint, when some joint's bind pose differs from the
+/// model's by more than `tolerance` (e.g. 1e-3) relative to the matrices' size after the
+/// alignment: positions alone cannot fix that.
+///
+/// # Safety
+/// `model` must be live; `engine_inverse_binds` must point to `16 × count` floats;
+/// `out_matrix` to 16 writable floats and `out_normal_matrix`, if not null, to 9.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn skf_model_bind_space(
+    model: *const SkfModel,
+    engine_inverse_binds: *const f32,
+    count: usize,
+    tolerance: f32,
+    out_matrix: *mut f32,
+    out_normal_matrix: *mut f32,
+) -> SkfStatus {
+    guard("skf_model_bind_space", || {
+        // SAFETY: the caller's contract above.
+        let model = unsafe { ptr::object(model, "model") }?;
+        let len = count
+            .checked_mul(16)
+            .ok_or_else(|| Failure::invalid(format!("`count` = {count} is absurd")))?;
+        // SAFETY: the caller's contract above.
+        let raw = unsafe { ptr::slice(engine_inverse_binds, len, "engine_inverse_binds") }?;
+        // SAFETY: the caller's contract above.
+        let out = unsafe { ptr::slice_mut(out_matrix, 16, "out_matrix") }?;
+        let out_normal = if out_normal_matrix.is_null() {
+            None
+        } else {
+            // SAFETY: non-null, the caller's contract above.
+            Some(unsafe { ptr::slice_mut(out_normal_matrix, 9, "out_normal_matrix") }?)
+        };
+        if !(tolerance.is_finite() && tolerance >= 0.0) {
+            return Err(Failure::invalid(format!(
+                "`tolerance` = {tolerance}: expected a finite value ≥ 0"
+            )));
+        }
+        let binds: Vec<Mat4> = raw.chunks_exact(16).map(Mat4::from_cols_slice).collect();
+        let skeleton = model.net.skeleton();
+        let identity;
+        let map = match &model.map {
+            Some(map) => map,
+            None => {
+                identity = JointMap::identity(skeleton);
+                &identity
+            }
+        };
+        let space = map
+            .bind_space(skeleton, &binds, tolerance)
+            .map_err(Failure::invalid)?;
+        out.copy_from_slice(&space.matrix().to_cols_array());
+        if let Some(n) = out_normal {
+            n.copy_from_slice(&space.normal_matrix().to_cols_array());
+        }
         Ok(())
     })
 }

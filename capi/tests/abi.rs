@@ -686,3 +686,161 @@ fn a_model_without_a_joint_map_takes_transforms_in_its_own_order() {
         skf_model_free(model);
     }
 }
+
+#[test]
+fn the_bind_space_through_the_c_abi_is_the_rust_one() {
+    use SkfStatus::{InvalidArgument as Invalid, NullPointer as Null};
+    let (bytes, positions, normals, tangents) = fixture(71);
+    let h = setup(&bytes, &positions, &normals, &tangents);
+    let net = SkinNetModel::from_skf(&bytes).unwrap();
+    let names = engine_names(&net);
+    let idx = engine_index(&net, &names);
+    // An engine whose bind space is the model's scaled to centimetres, turned Z-up and moved:
+    // its inverse bind matrices are the model's times M.
+    let m = glam::Mat4::from_scale_rotation_translation(
+        Vec3::splat(0.01),
+        glam::Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+        Vec3::new(0.1, -0.2, 0.3),
+    );
+    let mut binds = vec![glam::Mat4::IDENTITY; names.len()];
+    for (j, &e) in idx.iter().enumerate() {
+        binds[e] = net.skeleton().inverse_bind()[j] * m;
+    }
+    let flat: Vec<f32> = binds.iter().flat_map(|b| b.to_cols_array()).collect();
+    let (mut out, mut normal) = ([0f32; 16], [0f32; 9]);
+    let n = names.len();
+    // SAFETY: live handle, arrays of the stated lengths; the null ones are what is tested.
+    unsafe {
+        assert_eq!(
+            skf_model_bind_space(
+                h.model,
+                flat.as_ptr(),
+                n,
+                1e-4,
+                out.as_mut_ptr(),
+                normal.as_mut_ptr()
+            ),
+            SkfStatus::Ok,
+            "{}",
+            last_error()
+        );
+        let got = glam::Mat4::from_cols_array(&out);
+        assert!(got.abs_diff_eq(m, 1e-6), "{got} vs {m}");
+        // The same numbers as the Rust runtime's.
+        let engine: Vec<&str> = names.iter().map(|c| c.to_str().unwrap()).collect();
+        let space = skinfield_runtime::JointMap::new(net.skeleton(), &engine)
+            .unwrap()
+            .bind_space(net.skeleton(), &binds, 1e-4)
+            .unwrap();
+        assert_eq!(out, space.matrix().to_cols_array());
+        assert_eq!(normal, space.normal_matrix().to_cols_array());
+        // Unmapped, the matrices come in the model's joint order.
+        let mut plain = null_mut();
+        assert_eq!(
+            skf_model_load(bytes.as_ptr(), bytes.len(), &mut plain),
+            SkfStatus::Ok
+        );
+        let model_order: Vec<f32> = net
+            .skeleton()
+            .inverse_bind()
+            .iter()
+            .flat_map(|b| (*b * m).to_cols_array())
+            .collect();
+        let mut unmapped = [0f32; 16];
+        let status = skf_model_bind_space(
+            plain,
+            model_order.as_ptr(),
+            net.joint_count(),
+            1e-4,
+            unmapped.as_mut_ptr(),
+            null_mut(),
+        );
+        skf_model_free(plain);
+        assert_eq!(status, SkfStatus::Ok, "{}", last_error());
+        assert_eq!(unmapped, out);
+        // A normal matrix is optional.
+        assert_eq!(
+            skf_model_bind_space(
+                h.model,
+                flat.as_ptr(),
+                n,
+                1e-4,
+                out.as_mut_ptr(),
+                null_mut()
+            ),
+            SkfStatus::Ok
+        );
+        // One joint's bind pose moved by 5 % of the size: the bind poses differ.
+        let moved = idx[3];
+        let mut bad = flat.clone();
+        bad[16 * moved + 12] += 0.05
+            * bad[16 * moved..16 * moved + 16]
+                .iter()
+                .fold(0f32, |a, b| a.max(b.abs()));
+        let normal_ptr = normal.as_mut_ptr();
+        let call = |binds: *const f32, count, tolerance, out: *mut f32| {
+            skf_model_bind_space(h.model, binds, count, tolerance, out, normal_ptr)
+        };
+        let joint = net.skeleton().names()[3].clone();
+        let (bp, fp, op) = (bad.as_ptr(), flat.as_ptr(), out.as_mut_ptr());
+        let nn = n.to_string();
+        // Each call runs right before its message is read: the message is the last failure's.
+        type Case<'a> = (SkfStatus, Box<dyn Fn() -> SkfStatus + 'a>, Vec<&'a str>);
+        let cases: [Case; 8] = [
+            (
+                Invalid,
+                Box::new(|| call(bp, n, 1e-4, op)),
+                vec![&joint, "bind pose"],
+            ),
+            (
+                Null,
+                Box::new(|| skf_model_bind_space(null(), fp, n, 1e-4, op, null_mut())),
+                vec!["model"],
+            ),
+            (
+                Null,
+                Box::new(|| call(null(), n, 1e-4, op)),
+                vec!["engine_inverse_binds"],
+            ),
+            (
+                Null,
+                Box::new(|| call(fp, n, 1e-4, null_mut())),
+                vec!["out_matrix"],
+            ),
+            (
+                Invalid,
+                Box::new(|| call(fp, n - 1, 1e-4, op)),
+                vec!["engine_inverse_binds", &nn],
+            ),
+            (
+                Invalid,
+                Box::new(|| call(fp, usize::MAX, 1e-4, op)),
+                vec!["count"],
+            ),
+            (
+                Invalid,
+                Box::new(|| call(fp, n, f32::NAN, op)),
+                vec!["tolerance"],
+            ),
+            (
+                Invalid,
+                Box::new(|| call(fp, n, -1.0, op)),
+                vec!["tolerance"],
+            ),
+        ];
+        for (status, run, words) in cases {
+            support::fails(
+                run(),
+                status,
+                &[&["skf_model_bind_space"][..], &words].concat(),
+            );
+        }
+        let mut nan = flat.clone();
+        nan[16 * idx[1] + 5] = f32::NAN;
+        support::fails(
+            call(nan.as_ptr(), n, 1e-4, out.as_mut_ptr()),
+            Invalid,
+            &["skf_model_bind_space", "engine_inverse_binds", "non-finite"],
+        );
+    }
+}

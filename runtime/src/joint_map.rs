@@ -52,6 +52,13 @@ impl BindSpace {
             .collect()
     }
 
+    /// The inverse transpose of the transform's linear part, which carries normals (renormalise
+    /// after it) and, for tangents, the matrix's linear part itself.
+    #[must_use]
+    pub fn normal_matrix(&self) -> Mat3 {
+        self.normal
+    }
+
     /// Rest normals in the model's canonical space (unit length; zero stays zero).
     #[must_use]
     pub fn normals(&self, normals: &[Vec3]) -> Vec<Vec3> {
