@@ -6,19 +6,12 @@ mod common;
 use common::trainer;
 use skinfield_formats::capture::load_capture;
 
-#[test]
-fn a_capture_without_motion_is_tracked_and_only_then_trained() {
-    let tmp = tempfile::tempdir().unwrap();
-    let cap = tmp.path().join("cap");
-    let c = cap.to_str().unwrap();
-    let (code, _, err) = trainer(&[
+/// `trainer synth` of a one-frame built-in capture with keypoints into `out`, plus `extra`.
+fn tiny_synth_with_keypoints(out: &str, extra: &[&str]) -> (i32, String, String) {
+    let mut args = vec![
         "synth",
         "--out",
-        c,
-        "--cameras",
-        "4",
-        "--resolution",
-        "48",
+        out,
         "--grid",
         "40",
         "--vertices",
@@ -28,7 +21,17 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
         "--test-frames",
         "1",
         "--keypoints",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    trainer(&args)
+}
+
+#[test]
+fn a_capture_without_motion_is_tracked_and_only_then_trained() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let c = cap.to_str().unwrap();
+    let (code, _, err) = tiny_synth_with_keypoints(c, &["--cameras", "4", "--resolution", "48"]);
     assert_eq!(code, 0, "{err}");
     let truth = load_capture(&cap).unwrap().poses;
     // Drop the motion, as a capture from video and a 2D detector would come.
@@ -79,26 +82,17 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
 fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("cap");
-    let (code, _, err) = trainer(&[
-        "synth",
-        "--out",
+    let (code, _, err) = tiny_synth_with_keypoints(
         cap.to_str().unwrap(),
-        "--cameras",
-        "2",
-        "--resolution",
-        "32",
-        "--grid",
-        "40",
-        "--vertices",
-        "2500",
-        "--train-frames",
-        "1",
-        "--test-frames",
-        "1",
-        "--keypoints",
-        "--landmarks",
-        "joint-sides",
-    ]);
+        &[
+            "--cameras",
+            "2",
+            "--resolution",
+            "32",
+            "--landmarks",
+            "joint-sides",
+        ],
+    );
     assert_eq!(code, 0, "{err}");
     let capture = load_capture(&cap).unwrap();
     let map = capture.landmark_map().unwrap().unwrap();

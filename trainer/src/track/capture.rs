@@ -80,15 +80,7 @@ pub fn default_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
             format: "skinfield-landmarks".into(),
             detector: "joints".into(),
             keypoints: skeleton.names().to_vec(),
-            landmarks: skeleton
-                .names()
-                .iter()
-                .map(|n| LandmarkEntry {
-                    keypoint: n.clone(),
-                    joint: n.clone(),
-                    offset: [0.0; 3],
-                })
-                .collect(),
+            landmarks: joint_landmarks(skeleton),
         }
     }
 }
@@ -105,15 +97,7 @@ pub fn default_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
 pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
     let local = skeleton.bind_local();
     let mut keypoints = skeleton.names().to_vec();
-    let mut landmarks: Vec<LandmarkEntry> = skeleton
-        .names()
-        .iter()
-        .map(|n| LandmarkEntry {
-            keypoint: n.clone(),
-            joint: n.clone(),
-            offset: [0.0; 3],
-        })
-        .collect();
+    let mut landmarks = joint_landmarks(skeleton);
     for (j, name) in skeleton.names().iter().enumerate() {
         // The bone in the joint's own frame: to the first child, or back to the parent.
         let leaf = skeleton.children(j).next().is_none();
@@ -155,6 +139,19 @@ pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
         keypoints,
         landmarks,
     }
+}
+
+/// One landmark per joint, at the joint, its keypoint named as the joint.
+fn joint_landmarks(skeleton: &Skeleton) -> Vec<LandmarkEntry> {
+    skeleton
+        .names()
+        .iter()
+        .map(|n| LandmarkEntry {
+            keypoint: n.clone(),
+            joint: n.clone(),
+            offset: [0.0; 3],
+        })
+        .collect()
 }
 
 /// The tracker's landmarks of a (validated) map, and for each the index of its keypoint in the
