@@ -99,6 +99,9 @@ pub struct Trainer {
     /// `Σ_ij w_init ln w_init / V`, the constant that turns the warm start's cross-entropy into
     /// a KL divergence.
     init_entropy: f64,
+    /// With [`TrainData::queries`]: `Σ_j w_init ln w_init` of every full-resolution row, so a
+    /// batch of query rows sums its constant instead of copying its weights out each step.
+    query_neg_entropy: Vec<f64>,
     /// Time per phase of the iterations run so far.
     profile: StepProfile,
     /// The training template's edges (silhouette edges are found among them every view).
@@ -138,11 +141,6 @@ const PHASE_WARM: u64 = 1;
 const PHASE_IMAGE: u64 = 2;
 /// Added to a phase for its query-point stream ([`queries`]).
 const PHASE_QUERY_OFFSET: u64 = 100;
-
-/// `Σ_ij w ln w / v` of dense weights `w`: with the cross-entropy, the KL divergence.
-fn mean_neg_entropy(w: &[f32], v: usize) -> f64 {
-    crate::losses::prior::neg_entropy(w) / v.max(1) as f64
-}
 
 fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {
     // Distinct, reproducible streams per (seed, phase, iteration).
@@ -281,13 +279,21 @@ impl Trainer {
         let triangles: Arc<[[u32; 3]]> = t.triangles.clone().into();
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
-        let init_entropy = mean_neg_entropy(&data.init_weights, v);
+        let init_entropy = crate::losses::prior::neg_entropy(&data.init_weights) / v.max(1) as f64;
         let query_init = match &data.queries {
             Some(q) if !static_weights => {
                 let n = q.positions.len();
                 Some(Tensor::from_vec(q.init_weights.clone(), (n, j), &dev)?)
             }
             _ => None,
+        };
+        let query_neg_entropy = match &data.queries {
+            Some(q) if !static_weights => q
+                .init_weights
+                .chunks(j)
+                .map(crate::losses::prior::neg_entropy)
+                .collect(),
+            _ => Vec::new(),
         };
         let optimiser = Adam::from_varmap(&varmap, Self::adam_config(&config, static_weights))?;
         let query_rest = match &data.queries {
@@ -312,6 +318,7 @@ impl Trainer {
             init,
             query_init,
             init_entropy,
+            query_neg_entropy,
             profile: StepProfile::default(),
             edges,
             triangles,

@@ -37,7 +37,7 @@ impl Trainer {
         let init = self.init_at(query.as_ref())?;
         let v = self.data.template.vertex_count();
         let b = frames.len();
-        let (cross, init_entropy) = self.prior_cross_entropy(&w, &init, query.is_some())?;
+        let (cross, init_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref())?;
         timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         let skinning = self.frame_skinning(&frames)?;
         let rest = self.rest_at(query.as_ref())?;
@@ -141,7 +141,7 @@ impl Trainer {
             w.detach()
         };
         let (prior, init_entropy) =
-            self.prior_cross_entropy(&prior_input, &init, query.is_some())?;
+            self.prior_cross_entropy(&prior_input, &init, query.as_ref())?;
         let terms = [
             (&sb * lw.silhouette_boundary)?,
             (&sc * lw.silhouette_contour)?,
@@ -179,20 +179,27 @@ impl Trainer {
     }
 
     /// The prior's cross-entropy ([`crate::losses::prior`]) averaged over the batch's vertices
-    /// (`w` is `[B, V, J]`, `init` `[1, V, J]`), and the initial weights' mean negative entropy:
-    /// their sum is `KL(w_init ‖ w)` per vertex.
+    /// (`w` is `[B, V, J]`, `init` `[1, V, J]`, at query rows `query` or at the training
+    /// vertices), and the initial weights' mean negative entropy there: their sum is
+    /// `KL(w_init ‖ w)` per vertex.
     fn prior_cross_entropy(
         &self,
         w: &Tensor,
         init: &Tensor,
-        at_queries: bool,
+        query: Option<&Tensor>,
     ) -> Result<(Tensor, f64), TrainError> {
         let (b, v) = (w.dim(0)?, self.data.template.vertex_count());
         let cross = (crate::losses::prior::cross_entropy(w, init)? / ((b * v) as f64))?;
-        let init_entropy = if at_queries {
-            mean_neg_entropy(&init.flatten_all()?.to_vec1::<f32>()?, v)
-        } else {
-            self.init_entropy
+        let init_entropy = match query {
+            Some(rows) => {
+                let rows = rows.to_vec1::<u32>()?;
+                let total: f64 = rows
+                    .iter()
+                    .map(|&r| self.query_neg_entropy[r as usize])
+                    .sum();
+                total / v.max(1) as f64
+            }
+            None => self.init_entropy,
         };
         Ok((cross, init_entropy))
     }
