@@ -53,16 +53,17 @@ impl Drop for Fast {
 }
 
 impl Fast {
+    /// Poses the frame from `locals` (the engine's order when mapped); the nodes are then stale.
+    fn set_pose(&self, locals: &[SkfTransform]) {
+        // SAFETY: live handles, an array of the stated length.
+        ok(unsafe { skf_frame_set_pose(self.frame, self.model, locals.as_ptr(), locals.len()) });
+    }
+
     /// Poses the frame from `locals` (the engine's order when mapped) and updates the nodes.
     fn pose(&self, locals: &[SkfTransform]) {
-        // SAFETY: live handles, an array of the stated length.
+        self.set_pose(locals);
+        // SAFETY: live handles.
         unsafe {
-            ok(skf_frame_set_pose(
-                self.frame,
-                self.model,
-                locals.as_ptr(),
-                locals.len(),
-            ));
             ok(skf_fast_nodes_update(
                 self.model,
                 self.fast_mesh,
@@ -449,12 +450,7 @@ fn every_bad_fast_path_argument_is_a_status_naming_it() {
             Invalid,
             &["skf_fast_nodes_update", "pose"],
         );
-        ok(skf_frame_set_pose(
-            f.frame,
-            f.model,
-            pose.as_ptr(),
-            pose.len(),
-        ));
+        f.set_pose(&pose);
         // Posed, nodes not updated yet.
         fails(
             skin(f.fast_mesh, f.frame, f.nodes, 0, 4, 0, n, &mut vbo),
@@ -552,12 +548,7 @@ fn every_bad_fast_path_argument_is_a_status_naming_it() {
             &["skf_skin_fast", "nodes", "another model or mesh"],
         );
         // A new pose makes the nodes stale until they are updated again.
-        ok(skf_frame_set_pose(
-            f.frame,
-            f.model,
-            pose.as_ptr(),
-            pose.len(),
-        ));
+        f.set_pose(&pose);
         fails(
             skin(f.fast_mesh, f.frame, f.nodes, 0, 4, 0, n, &mut vbo),
             Invalid,
@@ -769,12 +760,7 @@ fn every_bad_top_k_argument_is_a_status_naming_it() {
     // SAFETY: every non-null pointer points to live data of at least the stated length; the
     // null and misaligned ones are what is tested.
     unsafe {
-        ok(skf_frame_set_pose(
-            f.frame,
-            f.model,
-            pose.as_ptr(),
-            pose.len(),
-        ));
+        f.set_pose(&pose);
         // Posed, nodes not updated yet.
         fails(
             good.run(),
