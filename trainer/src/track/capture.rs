@@ -96,12 +96,12 @@ pub fn default_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
 #[must_use]
 pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
     let local = skeleton.bind_local();
-    let mut keypoints = skeleton.names().to_vec();
     let mut landmarks = joint_landmarks(skeleton);
     for (j, name) in skeleton.names().iter().enumerate() {
         // The bone in the joint's own frame: to the first child, or back to the parent.
-        let leaf = skeleton.children(j).next().is_none();
-        let bone = match skeleton.children(j).next() {
+        let first_child = skeleton.children(j).next();
+        let leaf = first_child.is_none();
+        let bone = match first_child {
             Some(c) => local[c].translation,
             None if skeleton.parents()[j].is_some() => {
                 -(local[j].rotation.inverse() * local[j].translation)
@@ -120,10 +120,8 @@ pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
             .expect("three axes");
         let side = (axis - along * axis.dot(along)).normalize() * (0.25 * length);
         let mut add = |suffix: &str, offset: glam::Vec3| {
-            let keypoint = format!("{name}.{suffix}");
-            keypoints.push(keypoint.clone());
             landmarks.push(LandmarkEntry {
-                keypoint,
+                keypoint: format!("{name}.{suffix}"),
                 joint: name.clone(),
                 offset: offset.to_array(),
             });
@@ -136,7 +134,8 @@ pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
     LandmarkMapFile {
         format: "skinfield-landmarks".into(),
         detector: "joints+sides".into(),
-        keypoints,
+        // One keypoint per landmark, in the same order.
+        keypoints: landmarks.iter().map(|l| l.keypoint.clone()).collect(),
         landmarks,
     }
 }
