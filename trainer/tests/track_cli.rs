@@ -5,6 +5,7 @@ mod common;
 
 use common::trainer;
 use skinfield_formats::capture::load_capture;
+use skinfield_trainer::train::validation::held_out_indices;
 
 /// `trainer synth` of a one-frame built-in capture with keypoints into `out`, plus `extra`.
 fn tiny_synth_with_keypoints(out: &str, extra: &[&str]) -> (i32, String, String) {
@@ -103,4 +104,91 @@ fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
     let detections = capture.keypoints(0, 0, map.keypoints.len()).unwrap();
     assert_eq!(detections.len(), map.keypoints.len());
     assert!(detections.iter().filter(|d| d.is_some()).count() > map.keypoints.len() / 2);
+}
+
+#[test]
+fn train_refine_poses_writes_the_corrected_training_motion() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let c = cap.to_str().unwrap();
+    let (code, _, err) = trainer(&[
+        "synth",
+        "--out",
+        c,
+        "--grid",
+        "40",
+        "--vertices",
+        "2500",
+        "--train-frames",
+        "2",
+        "--test-frames",
+        "1",
+        "--cameras",
+        "4",
+        "--resolution",
+        "48",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let capture = load_capture(&cap).unwrap();
+    let config = tmp.path().join("c.json");
+    std::fs::write(
+        &config,
+        r#"{"iterations": 16, "warm_start_iterations": 4, "validation_every": 8,
+            "pose_refinement": {"lr": 0.01}}"#,
+    )
+    .unwrap();
+    let model = tmp.path().join("m.skf");
+    let (code, out, err) = trainer(&[
+        "train",
+        "--capture",
+        c,
+        "--out",
+        model.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--refine-poses",
+        "--allow-worse",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    // The validation frames (`held_out_indices`) and the test frames keep their poses; every
+    // other training frame was corrected.
+    let held: Vec<usize> = held_out_indices(capture.train_frames.len(), 4)
+        .into_iter()
+        .map(|i| capture.train_frames[i])
+        .collect();
+    assert!(!held.is_empty());
+    let corrected = capture.train_frames.len() - held.len();
+    assert!(
+        out.contains(&format!("pose refinement: {corrected} training frames")),
+        "{out}"
+    );
+    let path = tmp.path().join("m.skf.work/refined_motion.json");
+    let refined: skinfield_formats::capture::MotionFile =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(refined.frames.len(), capture.frame_count());
+    for (f, (got, pose)) in refined.frames.iter().zip(&capture.poses).enumerate() {
+        let moved = got.iter().zip(&pose.locals).any(|(g, l)| {
+            let l = skinfield_formats::capture::transform_to_array(l);
+            g.iter().zip(l).any(|(a, b)| (a - b).abs() > 1e-5)
+        });
+        let trained = capture.train_frames.contains(&f) && !held.contains(&f);
+        assert_eq!(moved, trained, "frame {f}");
+    }
+    // Without the flag there is no such file.
+    let plain = tmp.path().join("p.skf");
+    let (code, out, err) = trainer(&[
+        "train",
+        "--capture",
+        c,
+        "--out",
+        plain.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--allow-worse",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!out.contains("pose refinement"), "{out}");
+    assert!(!tmp.path().join("p.skf.work/refined_motion.json").exists());
 }

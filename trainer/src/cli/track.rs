@@ -214,5 +214,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
              {worst:.3}) skeleton units"
         )?;
     }
+    writeln!(
+        out,
+        "train on it with `trainer train --capture {} --refine-poses …`: the tracked poses are \
+         corrected together with the weights",
+        args.out.display()
+    )?;
     Ok(())
 }

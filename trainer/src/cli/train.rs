@@ -7,11 +7,12 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Parser;
 use skinfield_formats::StaticSkin;
-use skinfield_formats::capture::{Capture, load_capture};
+use skinfield_formats::capture::{Capture, MotionFile, load_capture, transform_to_array};
 use skinfield_trainer::eval::static_weights::write_static_weights;
 use skinfield_trainer::train::data::{DataOptions, initial_weights, static_train_data, train_data};
 use skinfield_trainer::train::plot::plot_log;
 use skinfield_trainer::train::stages::{ColourSource, load_images};
+use skinfield_trainer::train::validation::held_out_indices;
 use skinfield_trainer::train::{TrainConfig, Trainer};
 
 /// Arguments of `trainer train`.
@@ -45,6 +46,12 @@ pub struct Args {
     /// weights (by default that is an error and nothing is written).
     #[arg(long)]
     pub allow_worse: bool,
+    /// Correct every training frame's pose together with the weights, from the same images
+    /// (`pose_refinement.enabled` in the configuration): for a capture whose motion was tracked
+    /// (`trainer track`). The corrected motion is written to `refined_motion.json` in the work
+    /// folder.
+    #[arg(long)]
+    pub refine_poses: bool,
 }
 
 /// Runs `trainer train`.
@@ -57,6 +64,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if args.allow_worse {
         config.refuse_worse_than_initial = false;
+    }
+    if args.refine_poses {
+        config.pose_refinement.enabled = true;
     }
     let work = args
         .work
@@ -146,6 +156,7 @@ pub fn train_skinnet(
     // Stage 4's average, when it ran.
     trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
+    write_refined_motion(capture, &trainer, work)?;
     plot_logs(work, "SkinNet")?;
     check_validation(&trainer)?;
     let mut model = trainer.skf_model()?;
@@ -155,6 +166,62 @@ pub fn train_skinnet(
     }
     model.write(out)?;
     Ok(seconds)
+}
+
+/// With pose refinement: writes `work/refined_motion.json`, the capture's motion with every
+/// training frame's pose as the training corrected it (the validation and test frames as they
+/// were), in the capture's `motion.json` format, and prints the corrections' size.
+pub fn write_refined_motion(
+    capture: &Capture,
+    trainer: &Trainer,
+    work: &Path,
+) -> anyhow::Result<()> {
+    let (Some(poses), Some(corrections)) = (trainer.refined_poses()?, trainer.pose_corrections()?)
+    else {
+        return Ok(());
+    };
+    // The training frames the trainer kept, in its order (`Trainer::new` holds some out).
+    let mut frames = capture.train_frames.clone();
+    let held = held_out_indices(frames.len(), trainer.config().validation_frames);
+    for &i in held.iter().rev() {
+        frames.remove(i);
+    }
+    anyhow::ensure!(
+        frames.len() == poses.len(),
+        "pose refinement: {} refined poses for {} training frames",
+        poses.len(),
+        frames.len()
+    );
+    let mut motion = capture.poses.clone();
+    for (&f, pose) in frames.iter().zip(poses) {
+        motion[f] = pose;
+    }
+    let file = MotionFile {
+        fps: 30.0,
+        frames: motion
+            .iter()
+            .map(|p| p.locals.iter().map(transform_to_array).collect())
+            .collect(),
+    };
+    let path = work.join("refined_motion.json");
+    let json = serde_json::to_vec(&file)?;
+    skinfield_formats::skf::write_atomic(&path, &json)
+        .with_context(|| format!("writing {}", path.display()))?;
+    let angles: Vec<f64> = corrections
+        .iter()
+        .flat_map(|c| c.angles.iter().copied())
+        .collect();
+    let mean = angles.iter().sum::<f64>() / angles.len().max(1) as f64;
+    let largest = angles.iter().copied().fold(0.0, f64::max);
+    println!(
+        "pose refinement: {} training frames corrected by {:.2}° per joint on average, at \
+         most {largest_deg:.2}°; motion in {}",
+        corrections.len(),
+        mean.to_degrees(),
+        path.display(),
+        largest_deg = largest.to_degrees()
+    );
+    Ok(())
 }
 
 /// Plots the stage-1 logs of `work` (`losses.csv`, `validation.csv`, when present) beside them
@@ -275,6 +342,7 @@ pub fn train_static(
     trainer.run(work, progress)?;
     trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
+    write_refined_motion(capture, &trainer, work)?;
     plot_logs(work, "Static baseline")?;
     check_validation(&trainer)?;
     let mut dense = trainer

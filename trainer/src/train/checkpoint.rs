@@ -26,6 +26,11 @@ impl Trainer {
                 tensors.insert(format!("{prefix}{k}"), v);
             }
         }
+        if let Some(r) = &self.pose_refinement {
+            for (k, v) in r.state_tensors()? {
+                tensors.insert(format!("{prefix}{k}"), v);
+            }
+        }
         let window: Vec<f64> = self.warm_window.iter().flat_map(|w| [w.0, w.1]).collect();
         let n = self.warm_window.len();
         tensors.insert(
@@ -78,6 +83,9 @@ impl Trainer {
         } else {
             None
         };
+        if let Some(r) = &mut self.pose_refinement {
+            r.load_state_tensors(&state).map_err(&bad)?;
+        }
         let p = read_u64s(tensors, &format!("{prefix}progress"), 2).map_err(bad)?;
         self.warm_done = p[0];
         self.done = p[1];

@@ -200,6 +200,9 @@ pub struct TrainConfig {
     pub silhouette_huber_px: f32,
     /// Stages 2–4 (appearance field and rendering loss); all iterations 0 by default.
     pub stages: super::stages::StageConfig,
+    /// Per-frame pose corrections trained with the image losses (off by default; for captures
+    /// with tracked motion, [`super::pose_refinement`]).
+    pub pose_refinement: super::PoseRefinementConfig,
 }
 
 impl Default for TrainConfig {
@@ -239,6 +242,7 @@ impl Default for TrainConfig {
             clamp_pose_features: true,
             silhouette_huber_px: crate::losses::silhouette::DEFAULT_HUBER_PX,
             stages: super::stages::StageConfig::default(),
+            pose_refinement: super::PoseRefinementConfig::default(),
         }
     }
 }
@@ -331,6 +335,7 @@ impl TrainConfig {
         if self.candidate_joints > skinfield_formats::skf::candidates::MAX_CANDIDATES {
             return Err("candidate_joints");
         }
+        self.pose_refinement.validate()?;
         if self.validation_frames > 0 && self.validation_every == 0 {
             return Err("validation_every");
         }

@@ -24,6 +24,7 @@ pub mod config;
 pub mod data;
 mod error;
 pub mod plot;
+pub mod pose_refinement;
 pub mod profile;
 pub mod queries;
 mod records;
@@ -59,6 +60,7 @@ pub(crate) use checkpoint::{
 pub use config::{ConfigError, LaplacianReference, LossWeights, TrainConfig};
 pub use data::{Frame, TrainData, View};
 pub use error::TrainError;
+pub use pose_refinement::{FrameCorrection, PoseRefinementConfig};
 use profile::{IterationKind, Phase, StepProfile, Timer};
 use records::reopen_log;
 pub(crate) use records::reopen_log_keeping;
@@ -130,6 +132,8 @@ pub struct Trainer {
     best: Option<(validation::ValidationScore, u64, NamedTensors)>,
     /// `(image iteration, score)` of every validation so far.
     validation_log: Vec<(u64, validation::ValidationScore)>,
+    /// With [`PoseRefinementConfig::enabled`]: the training frames' pose corrections.
+    pose_refinement: Option<pose_refinement::PoseRefinement>,
 }
 
 /// Copies of parameters by name.
@@ -212,6 +216,19 @@ impl Trainer {
         let bounds = t
             .bounds()
             .ok_or_else(|| TrainError::Data("template has no bounds".into()))?;
+        let diagonal = f64::from((bounds.max - bounds.min).length()).max(1e-9);
+        let pose_refinement = if config.pose_refinement.enabled {
+            let frames: Vec<&[Mat4]> = data.frames.iter().map(|f| f.skinning.as_slice()).collect();
+            Some(pose_refinement::PoseRefinement::new(
+                &frames,
+                data.skeleton.parents(),
+                data.skeleton.inverse_bind(),
+                diagonal,
+                config.pose_refinement,
+            )?)
+        } else {
+            None
+        };
         let (mut lo, mut hi) = (bounds.min, bounds.max);
         if config.cubic_normalisation {
             let (centre, half) = ((lo + hi) * 0.5, (hi - lo).max_element() * 0.5);
@@ -327,11 +344,12 @@ impl Trainer {
             average: None,
             warm_window: std::collections::VecDeque::new(),
             warm_converged: false,
-            diagonal: f64::from((bounds.max - bounds.min).length()).max(1e-9),
+            diagonal,
             validation,
             initial_score,
             best: None,
             validation_log: Vec::new(),
+            pose_refinement,
         })
     }
 
@@ -713,13 +731,58 @@ impl Trainer {
         }
     }
 
-    /// Skinning matrices of `frames` as `[B, J, 4, 4]`-shaped data for [`lbs`].
+    /// Skinning matrices `[B, J, 12]` of training frames `frames`, with their pose
+    /// corrections when [`PoseRefinementConfig::enabled`] (differentiable in them).
     fn frame_skinning(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
         let mats: Vec<Vec<Mat4>> = frames
             .iter()
             .map(|&f| self.data.frames[f].skinning.clone())
             .collect();
-        Ok(skinning_tensor(&mats, &Device::Cpu)?)
+        let base = skinning_tensor(&mats, &Device::Cpu)?;
+        Ok(match &self.pose_refinement {
+            Some(r) => r.apply(frames, &base)?,
+            None => base,
+        })
+    }
+
+    /// With [`PoseRefinementConfig::enabled`]: each training frame's pose as corrected so far (in
+    /// the training frames' order, the validation frames left out), as local transforms.
+    pub fn refined_poses(&self) -> Result<Option<Vec<skinfield_formats::Pose>>, TrainError> {
+        if self.pose_refinement.is_none() {
+            return Ok(None);
+        }
+        let skeleton = &self.data.skeleton;
+        let bind: Vec<Mat4> = skeleton
+            .inverse_bind()
+            .iter()
+            .map(|m| m.inverse())
+            .collect();
+        let mut poses = Vec::with_capacity(self.data.frames.len());
+        for f in 0..self.data.frames.len() {
+            let rows = self.frame_skinning(&[f])?.flatten_all()?.to_vec1::<f32>()?;
+            let world: Vec<Mat4> = rows
+                .chunks_exact(12)
+                .zip(&bind)
+                .map(|(r, b)| {
+                    let mut m = [0.0; 16];
+                    m[..12].copy_from_slice(r);
+                    m[15] = 1.0;
+                    // `r` holds the top three rows, row-major.
+                    Mat4::from_cols_array(&m).transpose() * *b
+                })
+                .collect();
+            poses.push(pose_refinement::pose_from_world(skeleton, &world));
+        }
+        Ok(Some(poses))
+    }
+
+    /// With [`PoseRefinementConfig::enabled`]: each training frame's pose correction so far
+    /// (in the training frames' order, the validation frames left out).
+    pub fn pose_corrections(&self) -> Result<Option<Vec<FrameCorrection>>, TrainError> {
+        Ok(match &self.pose_refinement {
+            Some(r) => Some(r.summary()?),
+            None => None,
+        })
     }
 
     /// The template posed with initial weights `init` (`[1, V, J]`) under `skinning` (`B`

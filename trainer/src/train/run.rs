@@ -122,6 +122,23 @@ impl Trainer {
         self.save_checkpoint(&ckpt)?;
         let profile_path = dir.join("profile.csv");
         std::fs::write(&profile_path, self.profile.csv()).map_err(io(&profile_path))?;
+        if let Some(corrections) = self.pose_corrections()? {
+            let path = dir.join("pose_refinement.csv");
+            let names = self.data.skeleton.names();
+            let mut text = String::from("training_frame,translation");
+            for n in names {
+                text += &format!(",{}_deg", n.replace([',', '"', '\n'], "_"));
+            }
+            text.push('\n');
+            for (f, c) in corrections.iter().enumerate() {
+                text += &format!("{f},{:.6e}", c.translation);
+                for a in &c.angles {
+                    text += &format!(",{:.4}", a.to_degrees());
+                }
+                text.push('\n');
+            }
+            skinfield_formats::skf::write_atomic(&path, text.as_bytes()).map_err(io(&path))?;
+        }
         bar.finish();
         Ok(())
     }

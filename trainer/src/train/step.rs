@@ -151,6 +151,9 @@ impl Trainer {
             (&prior * lw.prior)?,
         ];
         let mut terms = terms.to_vec();
+        if let Some(r) = &self.pose_refinement {
+            terms.push(r.prior(&frames)?);
+        }
         timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         terms.extend(self.rendering_term(&frames, &posed)?);
         timer.lap(&mut self.profile, KIND, Phase::Rendering);
@@ -170,6 +173,12 @@ impl Trainer {
         let grads = total.backward()?;
         timer.lap(&mut self.profile, KIND, Phase::Backward);
         self.optimiser.step(&grads)?;
+        // The corrections follow the image iterations' schedule (warm-up, cosine decay).
+        let schedule =
+            self.image_lr(self.done - 1) / Self::adam_config(&self.config, self.is_static()).lr;
+        if let Some(r) = &mut self.pose_refinement {
+            r.step(&frames, &grads, r.lr() * schedule)?;
+        }
         if let Some(a) = &mut self.average {
             a.update()?;
         }

@@ -39,7 +39,7 @@ use skinfield_formats::mesh::area_weighted_normals;
 use super::data::{DataError, DataOptions};
 use super::{Model, TrainError, Trainer, frame_rng, reopen_log_keeping};
 use crate::appearance::{Appearance, shadow_input};
-use crate::losses::lbs::{lbs, skinning_tensor};
+use crate::losses::lbs::lbs;
 use crate::losses::rendering::{RgbTarget, blur_within_mask, rendering_loss, sample_visible};
 use crate::raster::rasterize;
 use checkpoint::{STAGES_CHECKPOINT, StageProgress, StageState};
@@ -248,13 +248,13 @@ impl Trainer {
     }
 
     /// Posed training vertices `[B, V, 3]` of `frames`.
+    ///
+    /// With pose refinement, at the poses corrected so far (stage 4's iterations keep
+    /// correcting them, stages 2–3 do not).
     fn posed(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
         let w = self.weights(frames)?;
-        let mats: Vec<_> = frames
-            .iter()
-            .map(|&f| self.data.frames[f].skinning.clone())
-            .collect();
-        Ok(lbs(&w, &skinning_tensor(&mats, &Device::Cpu)?, &self.rest)?)
+        let skinning = self.frame_skinning(frames)?.detach();
+        Ok(lbs(&w, &skinning, &self.rest)?)
     }
 
     /// Mean rendering loss over the views of `frames` for posed vertices `[B, V, 3]`, samples
