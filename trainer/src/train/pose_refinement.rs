@@ -406,6 +406,18 @@ mod tests {
         ]
     }
 
+    /// Zero corrections of `frames` (skinning matrices of `skel`) with the default settings.
+    fn refinement(skel: &Skeleton, frames: &[&[Mat4]], diagonal: f64) -> PoseRefinement {
+        PoseRefinement::new(
+            frames,
+            skel.parents(),
+            skel.inverse_bind(),
+            diagonal,
+            PoseRefinementConfig::default(),
+        )
+        .unwrap()
+    }
+
     /// The Gibbs vector of `q` (`tan(θ/2) · axis`).
     fn gibbs(q: Quat) -> Vec3 {
         q.xyz() / q.w
@@ -426,14 +438,7 @@ mod tests {
         ];
         let shift = Vec3::new(0.03, -0.02, 0.05);
         let diagonal = 2.0;
-        let refine = PoseRefinement::new(
-            &[&base],
-            skel.parents(),
-            skel.inverse_bind(),
-            diagonal,
-            PoseRefinementConfig::default(),
-        )
-        .unwrap();
+        let refine = refinement(&skel, &[&base], diagonal);
         let mut rows: Vec<f32> = deltas.iter().flat_map(|d| gibbs(*d).to_array()).collect();
         rows.extend((shift / diagonal as f32).to_array());
         refine.corrections[0]
@@ -481,14 +486,7 @@ mod tests {
         let base = posed(&skel, &frame_pose(), Vec3::ZERO);
         let inverse: Vec<Quat> = frame_pose().iter().map(|q| q.inverse()).collect();
         let other = posed(&skel, &inverse, Vec3::X);
-        let refine = PoseRefinement::new(
-            &[&base, &other],
-            skel.parents(),
-            skel.inverse_bind(),
-            1.5,
-            PoseRefinementConfig::default(),
-        )
-        .unwrap();
+        let refine = refinement(&skel, &[&base, &other], 1.5);
         let s = skinning_tensor(&[other.clone(), base.clone()], &Device::Cpu).unwrap();
         let same = refine.apply(&[1, 0], &s).unwrap();
         let diff = (&same - &s).unwrap().abs().unwrap().max_all().unwrap();
@@ -577,14 +575,7 @@ mod tests {
     fn each_frame_steps_only_when_in_the_batch_and_the_state_round_trips() {
         let skel = skeleton();
         let base = posed(&skel, &frame_pose(), Vec3::ZERO);
-        let mut refine = PoseRefinement::new(
-            &[&base, &base, &base],
-            skel.parents(),
-            skel.inverse_bind(),
-            1.0,
-            PoseRefinementConfig::default(),
-        )
-        .unwrap();
+        let mut refine = refinement(&skel, &[&base, &base, &base], 1.0);
         let s = skinning_tensor(&[base.clone(), base.clone()], &Device::Cpu).unwrap();
         let out = refine.apply(&[2, 0], &s).unwrap();
         // Pull every matrix entry up: every frame in the batch must move, the other not.
@@ -604,14 +595,7 @@ mod tests {
         );
 
         let state = refine.state_tensors().unwrap();
-        let mut other = PoseRefinement::new(
-            &[&base, &base, &base],
-            skel.parents(),
-            skel.inverse_bind(),
-            1.0,
-            PoseRefinementConfig::default(),
-        )
-        .unwrap();
+        let mut other = refinement(&skel, &[&base, &base, &base], 1.0);
         other.load_state_tensors(&state).unwrap();
         assert_eq!(other.summary().unwrap(), refine.summary().unwrap());
         let mut missing = state.clone();

@@ -99,16 +99,7 @@ fn scene_scaled(frames: usize, scale: f32) -> (TrainData, Vec<f32>) {
             )
             .unwrap();
             // Ground-truth silhouette: the truth-skinned tube rasterised.
-            let posed: Vec<Vec3> = template
-                .positions
-                .iter()
-                .enumerate()
-                .map(|(i, p)| {
-                    (skinning[0] * p.extend(1.0) * truth[2 * i]
-                        + skinning[1] * p.extend(1.0) * truth[2 * i + 1])
-                        .truncate()
-                })
-                .collect();
+            let posed = tube_posed(&template.positions, &skinning, &truth);
             let cover = crate::raster::coverage(&camera, &posed, &template.triangles, 4);
             let target = SilhouetteTarget::from_coverage(64, 64, &cover).unwrap();
             Frame {
@@ -133,6 +124,18 @@ fn scene_scaled(frames: usize, scale: f32) -> (TrainData, Vec<f32>) {
         },
         truth,
     )
+}
+
+/// The two-joint tube's vertices `positions` posed by skinning matrices `skinning` with
+/// weights `weights` (`[V][2]`).
+pub(super) fn tube_posed(positions: &[Vec3], skinning: &[Mat4], weights: &[f32]) -> Vec<Vec3> {
+    positions
+        .iter()
+        .zip(weights.chunks_exact(2))
+        .map(|(p, w)| {
+            (skinning[0] * p.extend(1.0) * w[0] + skinning[1] * p.extend(1.0) * w[1]).truncate()
+        })
+        .collect()
 }
 
 pub(super) fn config() -> TrainConfig {
@@ -871,16 +874,7 @@ fn scene_with_training_silhouettes_of(frames: usize, train_truth: &[f32]) -> Tra
             continue;
         }
         for view in &mut frame.views {
-            let posed: Vec<Vec3> = template
-                .positions
-                .iter()
-                .enumerate()
-                .map(|(i, p)| {
-                    (frame.skinning[0] * p.extend(1.0) * train_truth[2 * i]
-                        + frame.skinning[1] * p.extend(1.0) * train_truth[2 * i + 1])
-                        .truncate()
-                })
-                .collect();
+            let posed = tube_posed(&template.positions, &frame.skinning, train_truth);
             let cover = crate::raster::coverage(&view.camera, &posed, &template.triangles, 4);
             view.target = SilhouetteTarget::from_coverage(64, 64, &cover).unwrap();
             view.coverage = cover.into();
@@ -1138,17 +1132,7 @@ fn pose_refinement_recovers_perturbed_training_poses_from_the_silhouettes() {
         Vec3::Y,
     );
     for frame in &mut exact.frames {
-        let posed: Vec<Vec3> = exact
-            .template
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                (frame.skinning[0] * p.extend(1.0) * truth[2 * i]
-                    + frame.skinning[1] * p.extend(1.0) * truth[2 * i + 1])
-                    .truncate()
-            })
-            .collect();
+        let posed = tube_posed(&exact.template.positions, &frame.skinning, &truth);
         let cover = crate::raster::coverage(&side, &posed, &exact.template.triangles, 4);
         frame.views.push(View {
             camera: side.clone(),

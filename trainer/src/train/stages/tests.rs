@@ -2,7 +2,7 @@ use glam::Vec3;
 
 use super::*;
 use crate::skinnet::position_inputs_tensor;
-use crate::train::tests::{config, scene, scene_with_queries};
+use crate::train::tests::{config, scene, scene_with_queries, tube_posed};
 use crate::train::{TrainConfig, TrainData};
 
 /// Albedo of the tube: bands along its length and around it (smooth, so images have gradients).
@@ -21,16 +21,7 @@ fn images(data: &TrainData, truth: &[f32], texture: impl Fn(Vec3) -> Vec3) -> Ve
     data.frames
         .iter()
         .map(|f| {
-            let posed: Vec<Vec3> = t
-                .positions
-                .iter()
-                .enumerate()
-                .map(|(i, p)| {
-                    (f.skinning[0] * p.extend(1.0) * truth[2 * i]
-                        + f.skinning[1] * p.extend(1.0) * truth[2 * i + 1])
-                        .truncate()
-                })
-                .collect();
+            let posed = tube_posed(&t.positions, &f.skinning, truth);
             f.views
                 .iter()
                 .map(|v| {
