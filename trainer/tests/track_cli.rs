@@ -137,19 +137,24 @@ fn train_refine_poses_writes_the_corrected_training_motion() {
             "pose_refinement": {"lr": 0.01}}"#,
     )
     .unwrap();
+    // `trainer train` into `out` with the configuration above, plus `extra`.
+    let train = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "--capture",
+            c,
+            "--out",
+            out,
+            "--config",
+            config.to_str().unwrap(),
+            "--allow-worse",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        trainer(&args)
+    };
     let model = tmp.path().join("m.skf");
-    let (code, out, err) = trainer(&[
-        "train",
-        "--capture",
-        c,
-        "--out",
-        model.to_str().unwrap(),
-        "--config",
-        config.to_str().unwrap(),
-        "--refine-poses",
-        "--allow-worse",
-        "--quiet",
-    ]);
+    let (code, out, err) = train(model.to_str().unwrap(), &["--refine-poses"]);
     assert_eq!(code, 0, "{err}");
     // The validation frames (`held_out_indices`) and the test frames keep their poses; every
     // other training frame was corrected.
@@ -177,17 +182,7 @@ fn train_refine_poses_writes_the_corrected_training_motion() {
     }
     // Without the flag there is no such file.
     let plain = tmp.path().join("p.skf");
-    let (code, out, err) = trainer(&[
-        "train",
-        "--capture",
-        c,
-        "--out",
-        plain.to_str().unwrap(),
-        "--config",
-        config.to_str().unwrap(),
-        "--allow-worse",
-        "--quiet",
-    ]);
+    let (code, out, err) = train(plain.to_str().unwrap(), &[]);
     assert_eq!(code, 0, "{err}");
     assert!(!out.contains("pose refinement"), "{out}");
     assert!(!tmp.path().join("p.skf.work/refined_motion.json").exists());
