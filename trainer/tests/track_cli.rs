@@ -66,10 +66,24 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
     assert!(!model.exists());
 
     let tracked = tmp.path().join("tracked");
-    let (code, _, err) = trainer(&["track", "--capture", c, "--out", tracked.to_str().unwrap()]);
+    let (code, _, err) = trainer(&[
+        "track",
+        "--capture",
+        c,
+        "--out",
+        tracked.to_str().unwrap(),
+        "--calibration-rounds",
+        "1",
+    ]);
     assert_eq!(code, 0, "{err}");
     let copy = load_capture(&tracked).unwrap();
     assert!(copy.has_motion());
+    // The skeleton calibration's table: a header and one row per joint, the root unmoved.
+    let bones = std::fs::read_to_string(tracked.join("bones.csv")).unwrap();
+    let rows: Vec<&str> = bones.lines().collect();
+    assert_eq!(rows[0], "joint,name,dx,dy,dz,offset,bone_length");
+    assert_eq!(rows.len(), 1 + copy.skeleton.len());
+    assert!(rows[1].starts_with("0,") && rows[1].contains(",0.000000,0.000000,0.000000,0.000000,"));
     // Fitted to the detections (2 px noise at 48²): the root within a few centimetres.
     for (f, (got, want)) in copy.poses.iter().zip(&truth).enumerate() {
         let d = got.locals[0]

@@ -49,6 +49,11 @@ pub struct Args {
     /// the masks) relative to the keypoints; 0 turns it off (5.5× faster, less accurate).
     #[arg(long, default_value_t = TrackOptions::default().silhouette_weight)]
     pub silhouette_weight: f64,
+    /// Rounds of skeleton calibration before the final fit (each fits the frames to the
+    /// keypoints, then every bone's length, shared by all frames, with their poses); 0 keeps the
+    /// template's bones. Writes `bones.csv` (each joint's offset along its bone).
+    #[arg(long, default_value_t = TrackOptions::default().calibration_rounds)]
+    pub calibration_rounds: usize,
     /// Weights of the silhouette term's body: `initial` (the capture's, bone heat when it ships
     /// none), `static:FILE` (`trainer train --static`), `skf:FILE` (SkinNet at the bind pose) or
     /// `oracle` (the capture's true weights; a ceiling for experiments).
@@ -109,6 +114,29 @@ pub fn synthesize_keypoints(capture: &Capture, args: &NoiseArgs) -> anyhow::Resu
     Ok(())
 }
 
+/// `bones.csv` of a calibration (one row per joint: its offset in the parent's frame, its
+/// length and the bone's bind-pose length, skeleton units), and the joint with the largest
+/// offset.
+fn bones_csv(
+    skeleton: &skinfield_formats::Skeleton,
+    offsets: &[glam::DVec3],
+) -> (String, (String, f64)) {
+    let mut csv = String::from("joint,name,dx,dy,dz,offset,bone_length\n");
+    let mut worst = (String::from("none"), 0.0);
+    for (j, (name, o)) in skeleton.names().iter().zip(offsets).enumerate() {
+        let bone = f64::from(skeleton.bind_local()[j].translation.length());
+        let length = o.length();
+        csv += &format!(
+            "{j},{name},{:.6},{:.6},{:.6},{length:.6},{bone:.6}\n",
+            o.x, o.y, o.z
+        );
+        if length > worst.1 {
+            worst = (name.clone(), length);
+        }
+    }
+    (csv, worst)
+}
+
 /// Runs `trainer track`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let load = || {
@@ -129,6 +157,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         limit_weight: args.limit_weight,
         robust_scale_px: args.robust_px,
         silhouette_weight: args.silhouette_weight,
+        calibration_rounds: args.calibration_rounds,
         ..TrackOptions::default()
     };
     let body_skin = match &args.body_weights {
@@ -198,6 +227,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     skinfield_formats::skf::write_atomic(&csv_path, csv.as_bytes())
         .with_context(|| format!("writing {}", csv_path.display()))?;
     let mut out = std::io::stdout().lock();
+    if let Some(calibration) = &tracked.calibration {
+        let bones_path = args.out.join("bones.csv");
+        let (csv, worst) = bones_csv(&capture.skeleton, &calibration.offsets);
+        skinfield_formats::skf::write_atomic(&bones_path, csv.as_bytes())
+            .with_context(|| format!("writing {}", bones_path.display()))?;
+        writeln!(
+            out,
+            "skeleton calibrated on {} frames: keypoint RMS {:.3} → {:.3} px; largest bone \
+             offset {:.3} skeleton units ({}); per joint: {}",
+            calibration.frames,
+            calibration.rms_before_px,
+            calibration.rms_after_px,
+            worst.1,
+            worst.0,
+            bones_path.display()
+        )?;
+    }
     writeln!(
         out,
         "tracked {} frames in {seconds:.1} s → {} (per-frame residuals: {})",

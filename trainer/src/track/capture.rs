@@ -6,6 +6,7 @@ use skinfield_formats::capture::keypoints::{BODY_25, Keypoint2d, LandmarkEntry, 
 use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
 use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
 
+use super::calibration::BoneCalibration;
 use super::kinematics::{Kinematics, Landmark};
 use super::silhouette::{BodySkinMismatch, TrackingBody};
 use super::solve::{Detection, FrameFit, TrackError, TrackOptions, Tracker};
@@ -32,6 +33,9 @@ pub enum CaptureTrackError {
         /// Why.
         source: TrackError,
     },
+    /// The skeleton calibration failed.
+    #[error("skeleton calibration: {0}")]
+    Calibration(TrackError),
     /// A pose did not fit the skeleton.
     #[error(transparent)]
     Skeleton(#[from] SkeletonError),
@@ -260,15 +264,20 @@ pub struct TrackedMotion {
     pub poses: Vec<Pose>,
     /// The fit of every frame.
     pub fits: Vec<FrameFit>,
+    /// The last skeleton calibration ([`TrackOptions::calibration_rounds`]); its offsets are in
+    /// the poses' local translations. `None` without calibration.
+    pub calibration: Option<BoneCalibration>,
 }
 
 /// Tracks every frame of `capture` from its keypoints, in frame order; a frame starts from the
 /// previous one when both belong to the same clip (the manifest's clips), otherwise from a
-/// heading search. The silhouette term's body is the template skinned with `body_skin` (one row
-/// per template vertex), or with the capture's initial weights (bone heat when it ships none)
-/// when `None`. A body closer to the truth biases the outline fit less (the true weights do, on
-/// CesiumMan); static weights learned from a first pass's motion did not
-/// (`docs/experiments/tracking.md`). `progress` is called after each frame.
+/// heading search. With [`TrackOptions::calibration_rounds`], the skeleton's bones are first
+/// calibrated to the keypoints ([`super::calibration`]). The silhouette term's body is the
+/// template skinned with `body_skin` (one row per template vertex), or with the capture's
+/// initial weights (bone heat when it ships none) when `None`. A body closer to the truth
+/// biases the outline fit less (the true weights do, on CesiumMan); static weights learned from
+/// a first pass's motion did not (`docs/experiments/tracking.md`). `progress` is called after
+/// each frame of the final fit.
 pub fn track_capture(
     capture: &Capture,
     options: &TrackOptions,
@@ -279,7 +288,6 @@ pub fn track_capture(
         .landmark_map()?
         .ok_or(CaptureTrackError::NoKeypoints)?;
     let landmarks = landmarks_of(&map, &capture.skeleton);
-    let kinematics = Kinematics::new(&capture.skeleton);
     let body = if options.silhouette_weight > 0.0 {
         let initial;
         let skin = match body_skin {
@@ -297,25 +305,7 @@ pub fn track_capture(
     } else {
         None
     };
-    let mut tracker = Tracker::new(
-        kinematics.clone(),
-        landmarks.iter().map(|(_, l)| *l).collect(),
-        &capture.rig.cameras,
-        capture.up_axis.unit().as_dvec3(),
-        options.clone(),
-    );
-    if let Some(body) = &body {
-        tracker = tracker.with_body(body);
-    }
-    let clip_of = |f: usize| {
-        capture
-            .manifest
-            .clips
-            .iter()
-            .position(|c| (c.first..c.first + c.count).contains(&f))
-    };
-    let mut fits: Vec<FrameFit> = Vec::with_capacity(capture.frame_count());
-    let mut poses = Vec::with_capacity(capture.frame_count());
+    let mut detections = Vec::with_capacity(capture.frame_count());
     for frame in 0..capture.frame_count() {
         let mut views = Vec::with_capacity(capture.rig.cameras.len());
         for cam in 0..capture.rig.cameras.len() {
@@ -332,26 +322,86 @@ pub fn track_capture(
                     .collect::<Vec<_>>(),
             );
         }
+        detections.push(views);
+    }
+    let mut tracker = Tracker::new(
+        Kinematics::new(&capture.skeleton),
+        landmarks.iter().map(|(_, l)| *l).collect(),
+        &capture.rig.cameras,
+        capture.up_axis.unit().as_dvec3(),
+        options.clone(),
+    );
+    let mut calibration = None;
+    for _ in 0..options.calibration_rounds {
+        let fits = fit_frames(capture, &tracker, &detections, false, |_| {})?;
+        let frames: Vec<_> = detections.iter().map(Vec::as_slice).zip(&fits).collect();
+        let c = tracker
+            .calibrate_bones(&frames)
+            .map_err(CaptureTrackError::Calibration)?;
+        tracker = tracker.with_bone_offsets(&c.offsets);
+        calibration = Some(c);
+    }
+    if let Some(body) = &body {
+        tracker = tracker.with_body(body);
+    }
+    let fits = fit_frames(
+        capture,
+        &tracker,
+        &detections,
+        body.is_some(),
+        &mut progress,
+    )?;
+    let poses = fits
+        .iter()
+        .map(|fit| {
+            tracker.kinematics().pose(
+                &capture.skeleton,
+                fit.root_rotation,
+                fit.world_shift,
+                &fit.angles,
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(TrackedMotion {
+        poses,
+        fits,
+        calibration,
+    })
+}
+
+/// Fits every frame of `capture` in order with `tracker` (each frame from its clip's previous
+/// one), with the masks for the silhouette term when `with_masks`.
+fn fit_frames(
+    capture: &Capture,
+    tracker: &Tracker<'_>,
+    detections: &[Vec<Vec<Option<Detection>>>],
+    with_masks: bool,
+    mut progress: impl FnMut(usize),
+) -> Result<Vec<FrameFit>, CaptureTrackError> {
+    let clip_of = |f: usize| {
+        capture
+            .manifest
+            .clips
+            .iter()
+            .position(|c| (c.first..c.first + c.count).contains(&f))
+    };
+    let mut fits: Vec<FrameFit> = Vec::with_capacity(detections.len());
+    for (frame, views) in detections.iter().enumerate() {
         let previous =
             (frame > 0 && clip_of(frame).is_some() && clip_of(frame) == clip_of(frame - 1))
                 .then(|| &fits[frame - 1]);
-        let masks = match body {
-            Some(_) => Some(frame_masks(capture, frame)?),
-            None => None,
+        let masks = if with_masks {
+            Some(frame_masks(capture, frame)?)
+        } else {
+            None
         };
         let fit = tracker
-            .fit_with_masks(&views, previous, masks.as_deref())
+            .fit_with_masks(views, previous, masks.as_deref())
             .map_err(|source| CaptureTrackError::Frame { frame, source })?;
-        poses.push(kinematics.pose(
-            &capture.skeleton,
-            fit.root_rotation,
-            fit.world_shift,
-            &fit.angles,
-        )?);
         fits.push(fit);
         progress(frame);
     }
-    Ok(TrackedMotion { poses, fits })
+    Ok(fits)
 }
 
 /// Every camera's mask of `frame` with its outline, for the silhouette term.

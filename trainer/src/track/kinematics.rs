@@ -30,6 +30,9 @@ pub struct Kinematics {
     bind: Vec<(DVec3, DQuat, DVec3)>,
     base: DMat4,
     angle_count: usize,
+    /// Calibrated change of each joint's bind-pose local translation (zero for the roots, whose
+    /// translation the alignment layer supplies); see [`super::calibration`].
+    bone_offsets: Vec<DVec3>,
 }
 
 /// Rotation of one joint's degrees of freedom, in f64 (`JointDofs::rotation` widened).
@@ -79,7 +82,65 @@ impl Kinematics {
                 .collect(),
             base: skeleton.base().as_dmat4(),
             angle_count: skeleton.angle_count(),
+            bone_offsets: vec![DVec3::ZERO; skeleton.len()],
         }
+    }
+
+    /// The layer with every joint's bind-pose local translation moved by `offsets` (one per
+    /// joint, in the parent's frame, skeleton units): a skeleton calibrated to the detections.
+    /// The roots' entries are ignored (the alignment layer places the skeleton).
+    ///
+    /// # Panics
+    /// If `offsets` does not have one entry per joint.
+    #[must_use]
+    pub fn with_bone_offsets(mut self, offsets: &[DVec3]) -> Self {
+        self.set_bone_offsets(offsets);
+        self
+    }
+
+    /// [`Self::with_bone_offsets`] in place.
+    ///
+    /// # Panics
+    /// If `offsets` does not have one entry per joint.
+    pub fn set_bone_offsets(&mut self, offsets: &[DVec3]) {
+        assert_eq!(
+            offsets.len(),
+            self.parents.len(),
+            "one bone offset per joint"
+        );
+        for ((o, new), parent) in self.bone_offsets.iter_mut().zip(offsets).zip(&self.parents) {
+            *o = if parent.is_some() { *new } else { DVec3::ZERO };
+        }
+    }
+
+    /// Joint `j`'s bind-pose local translation (its bone, in the parent's frame, before any
+    /// offset).
+    #[must_use]
+    pub fn bind_translation(&self, j: usize) -> DVec3 {
+        self.bind[j].0
+    }
+
+    /// Every joint's calibrated change of its bind-pose local translation (zero unless
+    /// [`Self::with_bone_offsets`] set one).
+    #[must_use]
+    pub fn bone_offsets(&self) -> &[DVec3] {
+        &self.bone_offsets
+    }
+
+    /// Diagonal of the bounding box of the joints in the bind pose (skeleton units, at least
+    /// 1e-9): the scale the calibration's prior is measured in.
+    #[must_use]
+    pub fn bind_size(&self) -> f64 {
+        let mut worlds = vec![DMat4::IDENTITY; self.parents.len()];
+        self.world_matrices(DQuat::IDENTITY, &vec![0.0; self.angle_count], &mut worlds);
+        let (lo, hi) = worlds.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), w| {
+                let p = w.w_axis.truncate();
+                (lo.min(p), hi.max(p))
+            },
+        );
+        (hi - lo).length().max(1e-9)
     }
 
     /// Number of joints.
@@ -118,7 +179,7 @@ impl Kinematics {
             if self.parents[j].is_none() {
                 r = (root_rotation * r).normalize();
             }
-            let local = DMat4::from_scale_rotation_translation(s, r, t);
+            let local = DMat4::from_scale_rotation_translation(s, r, t + self.bone_offsets[j]);
             out[j] = match self.parents[j] {
                 Some(p) => out[p] * local,
                 None => self.base * local,
@@ -155,7 +216,8 @@ impl Kinematics {
         self.base.inverse().transform_vector3(world)
     }
 
-    /// The [`Pose`] (f32) of a root rotation, a world-space shift and joint angles.
+    /// The [`Pose`] (f32) of a root rotation, a world-space shift and joint angles, with the
+    /// bone offsets in the joints' local translations.
     pub fn pose(
         &self,
         skeleton: &Skeleton,
@@ -166,6 +228,10 @@ impl Kinematics {
         let a: Vec<f32> = angles.iter().map(|&x| x as f32).collect();
         let t: Vec3 = self.root_translation_for(world_shift).as_vec3();
         let q: Quat = root_rotation.as_quat();
-        skeleton.pose_from_angles(q, t, &a)
+        let mut pose = skeleton.pose_from_angles(q, t, &a)?;
+        for (local, offset) in pose.locals.iter_mut().zip(&self.bone_offsets) {
+            local.translation += offset.as_vec3();
+        }
+        Ok(pose)
     }
 }

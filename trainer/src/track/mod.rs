@@ -4,11 +4,13 @@
 //! - [`kinematics`]: joint angles and root rotation → landmark positions (f64);
 //! - [`alignment`]: the root translation in closed form from the rays through the detections;
 //! - [`solve`]: the per-frame robust Levenberg–Marquardt fit;
+//! - [`calibration`]: bone offsets shared by every frame, fitted to the keypoints;
 //! - [`silhouette`]: the optional silhouette refinement on the skinned template;
 //! - [`capture`]: landmark maps, synthetic keypoints in a capture, tracking all its frames;
 //! - [`synthetic`]: detections projected from known landmarks, with noise, drops and swaps.
 
 pub mod alignment;
+pub mod calibration;
 pub mod capture;
 pub mod kinematics;
 pub mod silhouette;
@@ -16,6 +18,7 @@ pub mod solve;
 pub mod synthetic;
 
 pub use alignment::{Alignment, Ray, global_alignment};
+pub use calibration::BoneCalibration;
 pub use kinematics::{Kinematics, Landmark};
 pub use solve::{Detection, FrameFit, FrameReport, TrackError, TrackOptions, Tracker};
 
@@ -107,11 +110,19 @@ mod tests {
     #[test]
     fn kinematics_layer_matches_the_formats_forward_kinematics() {
         let skeleton = build_skeleton().unwrap();
-        let kin = Kinematics::new(&skeleton);
         let mut rng = ChaCha8Rng::seed_from_u64(5);
+        // Calibrated bones too (the root's offset is ignored: the alignment places the root).
+        let offsets: Vec<DVec3> = (0..skeleton.len())
+            .map(|_| DVec3::new(rng.random_range(-0.02..0.02), 0.01, -0.005))
+            .collect();
         let mut ours = vec![DMat4::IDENTITY; skeleton.len()];
         let mut theirs = vec![Mat4::IDENTITY; skeleton.len()];
-        for _ in 0..10 {
+        for i in 0..10 {
+            let kin = if i % 2 == 0 {
+                Kinematics::new(&skeleton)
+            } else {
+                Kinematics::new(&skeleton).with_bone_offsets(&offsets)
+            };
             let angles = random_angles(&skeleton, &mut rng);
             let root =
                 Quat::from_euler(glam::EulerRot::YXZ, rng.random_range(-3.0..3.0), 0.3, -0.2);

@@ -1,0 +1,645 @@
+//! Skeleton calibration: the length of every bone, shared by every frame, fitted to the
+//! keypoints.
+//!
+//! Why: the tracker poses the template's skeleton, whose bones have the lengths of its bind
+//! pose, and the person (or the clip) may not. CesiumMan's only clip moves both shoulders 3 mm
+//! towards the spine and the second spine joint 1 mm forward, in every frame, relative to the
+//! bind pose. Joint angles cannot shorten a bone, so the per-frame fit spreads that error over
+//! the arms' rotations the same way in every frame, and SkinNet trained on such motion learns
+//! weights that explain it and do not transfer (`docs/experiments/tracking.md`).
+//!
+//! Formulation: the bone lengths (each non-root joint's bind-pose local translation lengthened
+//! or shortened along itself) and the poses of up to [`MAX_CALIBRATION_FRAMES`] frames spread
+//! over the capture minimise together the frames' keypoint losses (confidence- and
+//! robust-weighted reprojection errors, Eq. 6, and the joint-limit prior, Eq. 7; no temporal
+//! term, so the frames are independent given the lengths). Together, not in alternation:
+//! with the poses held, the fits have already absorbed the lengths' error into the angles, and
+//! alternating recovered half of CesiumMan's shoulders in four rounds. The normal equations
+//! have the bundle-adjustment structure (a block per frame, coupled only through the lengths),
+//! solved by the Schur complement on the lengths: Levenberg–Marquardt with a central-difference
+//! Jacobian, the robust (Geman–McClure) weights at the tracker's final scale recomputed once. Only lengths: an offset across a
+//! bone is, but for the side points, a constant turn of its parent, which the per-frame angles
+//! already have; free 3D offsets traded with those turns on CesiumMan (exact detections: the
+//! elbows moved 2 mm across their bones while the shoulders' 3 mm came back as 2.5 mm), while
+//! lengths are what a person's skeleton differs in. Each frame's root translation comes from
+//! the alignment layer at every evaluation, so a length a root translation can explain (a bone
+//! from a root that does not turn) stays with the root. A weak quadratic prior, [`BONE_PRIOR`]
+//! px² per (1 % of the skeleton's size)², keeps lengths the detections do not see at the
+//! template's and makes the problem well posed. Levenberg–Marquardt with a central-difference
+//! Jacobian, the robust (Geman–McClure) weights at the tracker's final scale recomputed once.
+//! `track_capture` fits the frames to the keypoints, calibrates, and fits again (with the
+//! temporal and silhouette terms) on the calibrated skeleton.
+
+use glam::{DQuat, DVec3};
+
+use super::solve::{
+    Detection, FrameFit, Observation, TrackError, Tracker, cholesky_factor, cholesky_substitute,
+    normal_equations,
+};
+
+/// Frames a calibration uses at most (evenly spread): the lengths are shared, and 32 frames of
+/// a dozen views see every bone hundreds of times.
+pub const MAX_CALIBRATION_FRAMES: usize = 32;
+/// Weight of the prior that holds each bone's change of length at zero: px² per (1 % of the
+/// skeleton's bind-pose size)². From exact detections of eight frames it pulls a changed
+/// length back by about 0.1 % of the change (1.0 pulled by 0.5–1 %).
+pub const BONE_PRIOR: f64 = 0.1;
+/// Levenberg–Marquardt iterations per reweighting round (cap).
+const ITERATIONS: usize = 30;
+/// Central-difference step (radians for the poses, 1 % of the skeleton's size for the lengths).
+const STEP: f64 = 1e-6;
+
+/// The result of [`Tracker::calibrate_bones`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoneCalibration {
+    /// One offset per joint (in its parent's frame, along its bone, skeleton units; zero for
+    /// the roots): the tracker's offsets plus the change this calibration found.
+    pub offsets: Vec<DVec3>,
+    /// RMS reprojection error (pixels) of the calibration frames at their fits, weighted by
+    /// confidence and the final robust weights.
+    pub rms_before_px: f64,
+    /// The same at the calibrated lengths and the poses refitted with them.
+    pub rms_after_px: f64,
+    /// Frames used.
+    pub frames: usize,
+}
+
+/// One frame of a calibration: its observations, robust weights and pose parameters (the
+/// root's rotation vector relative to `root0`, then the angles).
+struct Frame {
+    obs: Vec<Observation>,
+    robust: Vec<f64>,
+    root0: DQuat,
+    params: Vec<f64>,
+}
+
+/// The lengths' parametrisation: one parameter per non-root joint with a bone, in units of
+/// 1 % of the skeleton's size, along the bone.
+struct Lengths {
+    /// Joint and the bone's unit direction in the parent's frame.
+    movable: Vec<(usize, DVec3)>,
+    unit: f64,
+    base: Vec<DVec3>,
+}
+
+impl Lengths {
+    fn offsets(&self, params: &[f64]) -> Vec<DVec3> {
+        let mut out = self.base.clone();
+        for (&(j, direction), p) in self.movable.iter().zip(params) {
+            out[j] += direction * (p * self.unit);
+        }
+        out
+    }
+}
+
+impl Frame {
+    /// Residuals at `params` on `tracker`'s skeleton.
+    fn residuals(&self, tracker: &Tracker<'_>, params: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; tracker.frame_residual_count(&self.obs)];
+        tracker.frame_residuals(&self.obs, &self.robust, self.root0, params, &mut out);
+        out
+    }
+
+    /// Sum of the squared keypoint residuals in `r` and of their weights.
+    fn keypoint_energy(&self, r: &[f64]) -> (f64, f64) {
+        let sum = r[..2 * self.obs.len()].iter().map(|x| x * x).sum();
+        let weight = self
+            .obs
+            .iter()
+            .zip(&self.robust)
+            .map(|(o, w)| o.confidence * w)
+            .sum();
+        (sum, weight)
+    }
+
+    /// Geman–McClure weights of the reprojection errors at `params` (from residuals computed
+    /// with unit robust weights).
+    fn reweigh(&mut self, tracker: &Tracker<'_>) {
+        self.robust = vec![1.0; self.obs.len()];
+        let r = self.residuals(tracker, &self.params);
+        let errors: Vec<f64> = self
+            .obs
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                let e = DVec3::new(r[2 * i], r[2 * i + 1], 0.0).length();
+                e / o.confidence.max(1e-12).sqrt()
+            })
+            .collect();
+        self.robust = tracker.robust_weights(&errors, tracker.options.robust_scale_px);
+    }
+}
+
+/// One frame's linearisation: `U = JₓᵀJₓ`, `W = JₓᵀJ_b`, `Jₓᵀr`, and its share of `J_bᵀJ_b`,
+/// `J_bᵀr`.
+struct Block {
+    u: Vec<f64>,
+    w: Vec<f64>,
+    gx: Vec<f64>,
+    v: Vec<f64>,
+    gb: Vec<f64>,
+}
+
+impl Tracker<'_> {
+    /// The bone lengths (as offsets) that best explain the detections of `frames` (each
+    /// frame's detections, one row per view as [`Self::fit`] takes them, and its fit), fitted
+    /// together with the frames' poses, starting from the tracker's current offsets and the
+    /// fits. See the [module docs](self).
+    ///
+    /// # Errors
+    /// A frame's detections do not match the tracker's cameras or landmarks
+    /// ([`TrackError::ViewCount`], [`TrackError::LandmarkCount`], [`TrackError::NonFinite`]).
+    pub fn calibrate_bones(
+        &self,
+        frames: &[(&[Vec<Option<Detection>>], &FrameFit)],
+    ) -> Result<BoneCalibration, TrackError> {
+        let picked: Vec<usize> = if frames.len() <= MAX_CALIBRATION_FRAMES {
+            (0..frames.len()).collect()
+        } else {
+            (0..MAX_CALIBRATION_FRAMES)
+                .map(|i| i * frames.len() / MAX_CALIBRATION_FRAMES)
+                .collect()
+        };
+        let mut data = Vec::with_capacity(picked.len());
+        for &i in &picked {
+            let (detections, fit) = frames[i];
+            let obs = self.observations(detections)?;
+            let mut params = vec![0.0; 3];
+            params.extend_from_slice(&fit.angles);
+            data.push(Frame {
+                robust: vec![1.0; obs.len()],
+                obs,
+                root0: fit.root_rotation,
+                params,
+            });
+        }
+        let lengths = Lengths {
+            movable: (0..self.kinematics.joint_count())
+                .filter(|&j| self.kinematics.parents()[j].is_some())
+                .filter_map(|j| {
+                    let bone = self.kinematics.bind_translation(j);
+                    (bone.length() > 1e-12).then(|| (j, bone.normalize()))
+                })
+                .collect(),
+            unit: 0.01 * self.kinematics.bind_size(),
+            base: self.kinematics.bone_offsets().to_vec(),
+        };
+        let start: Vec<Vec<f64>> = data.iter().map(|f| f.params.clone()).collect();
+        let mut b = vec![0.0; lengths.movable.len()];
+        for frame in &mut data {
+            frame.reweigh(self);
+        }
+        for round in 0..2 {
+            self.joint_solve(&lengths, &mut data, &mut b);
+            if round == 0 {
+                let calibrated = self.clone().with_bone_offsets(&lengths.offsets(&b));
+                for frame in &mut data {
+                    frame.reweigh(&calibrated);
+                }
+            }
+        }
+        let rms = |tracker: &Tracker<'_>, params: &[Vec<f64>]| {
+            let (mut sum, mut weight) = (0.0, 0.0);
+            for (frame, p) in data.iter().zip(params) {
+                let (s, w) = frame.keypoint_energy(&frame.residuals(tracker, p));
+                sum += s;
+                weight += w;
+            }
+            (sum / f64::max(weight, 1e-300)).sqrt()
+        };
+        let calibrated = self.clone().with_bone_offsets(&lengths.offsets(&b));
+        let fitted: Vec<Vec<f64>> = data.iter().map(|f| f.params.clone()).collect();
+        Ok(BoneCalibration {
+            offsets: lengths.offsets(&b),
+            rms_before_px: rms(self, &start),
+            rms_after_px: rms(&calibrated, &fitted),
+            frames: picked.len(),
+        })
+    }
+
+    /// Levenberg–Marquardt on the lengths `b` and every frame's pose together, by the Schur
+    /// complement on the lengths.
+    fn joint_solve(&self, lengths: &Lengths, data: &mut [Frame], b: &mut [f64]) {
+        let nb = b.len();
+        let with = |b: &[f64]| self.clone().with_bone_offsets(&lengths.offsets(b));
+        let cost_of = |data: &[Frame], tracker: &Tracker<'_>, b: &[f64], params: &[&[f64]]| {
+            let mut c = BONE_PRIOR * b.iter().map(|x| x * x).sum::<f64>();
+            for (frame, p) in data.iter().zip(params) {
+                c += frame
+                    .residuals(tracker, p)
+                    .iter()
+                    .map(|x| x * x)
+                    .sum::<f64>();
+            }
+            0.5 * c
+        };
+        let mut mu = 1e-3;
+        let mut tracker = with(b);
+        let mut cost = cost_of(
+            data,
+            &tracker,
+            b,
+            &data.iter().map(|f| f.params.as_slice()).collect::<Vec<_>>(),
+        );
+        for _ in 0..ITERATIONS {
+            // The skeletons with one length moved either way, shared by every frame.
+            let shifted: Vec<(Tracker<'_>, Tracker<'_>)> = (0..nb)
+                .map(|k| {
+                    let mut plus = b.to_vec();
+                    let mut minus = b.to_vec();
+                    plus[k] += STEP;
+                    minus[k] -= STEP;
+                    (with(&plus), with(&minus))
+                })
+                .collect();
+            let blocks: Vec<Block> = data
+                .iter()
+                .map(|frame| self.linearise(frame, &tracker, &shifted))
+                .collect();
+            let mut v = vec![0.0; nb * nb];
+            let mut gb: Vec<f64> = b.iter().map(|x| BONE_PRIOR * x).collect();
+            for block in &blocks {
+                for (a, x) in v.iter_mut().zip(&block.v) {
+                    *a += x;
+                }
+                for (a, x) in gb.iter_mut().zip(&block.gb) {
+                    *a += x;
+                }
+            }
+            for i in 0..nb {
+                v[i * nb + i] += BONE_PRIOR;
+            }
+            let gradient = gb
+                .iter()
+                .chain(blocks.iter().flat_map(|k| k.gx.iter()))
+                .map(|g| g.abs())
+                .fold(0.0, f64::max);
+            if gradient < 1e-12 {
+                return;
+            }
+            let mut improved = false;
+            for _ in 0..12 {
+                match self.damped_step(&blocks, &v, &gb, mu) {
+                    Some((db, dx)) => {
+                        let b_try: Vec<f64> = b.iter().zip(&db).map(|(x, d)| x - d).collect();
+                        let p_try: Vec<Vec<f64>> = data
+                            .iter()
+                            .zip(&dx)
+                            .map(|(f, d)| f.params.iter().zip(d).map(|(x, d)| x - d).collect())
+                            .collect();
+                        let t_try = with(&b_try);
+                        let c = cost_of(
+                            data,
+                            &t_try,
+                            &b_try,
+                            &p_try.iter().map(Vec::as_slice).collect::<Vec<_>>(),
+                        );
+                        if c < cost {
+                            let rel = (cost - c) / cost.max(1e-300);
+                            b.copy_from_slice(&b_try);
+                            for (f, p) in data.iter_mut().zip(p_try) {
+                                f.params = p;
+                            }
+                            tracker = t_try;
+                            cost = c;
+                            mu = (mu * 0.3).max(1e-12);
+                            improved = true;
+                            if rel < 1e-12 {
+                                return;
+                            }
+                            break;
+                        }
+                        mu *= 10.0;
+                    }
+                    None => mu *= 10.0,
+                }
+            }
+            if !improved {
+                return;
+            }
+        }
+    }
+
+    /// One frame's [`Block`] at its parameters on `tracker`, with the lengths' derivatives
+    /// from the `shifted` skeletons.
+    fn linearise(
+        &self,
+        frame: &Frame,
+        tracker: &Tracker<'_>,
+        shifted: &[(Tracker<'_>, Tracker<'_>)],
+    ) -> Block {
+        let p = frame.params.len();
+        let nb = shifted.len();
+        let r = frame.residuals(tracker, &frame.params);
+        let m = r.len();
+        let mut jx = vec![0.0; m * p];
+        let mut params = frame.params.clone();
+        for c in 0..p {
+            let x = params[c];
+            params[c] = x + STEP;
+            let plus = frame.residuals(tracker, &params);
+            params[c] = x - STEP;
+            let minus = frame.residuals(tracker, &params);
+            params[c] = x;
+            for row in 0..m {
+                jx[row * p + c] = (plus[row] - minus[row]) / (2.0 * STEP);
+            }
+        }
+        let mut jb = vec![0.0; m * nb];
+        for (k, (plus, minus)) in shifted.iter().enumerate() {
+            let plus = frame.residuals(plus, &frame.params);
+            let minus = frame.residuals(minus, &frame.params);
+            for row in 0..m {
+                jb[row * nb + k] = (plus[row] - minus[row]) / (2.0 * STEP);
+            }
+        }
+        let (u, gx) = normal_equations(&jx, &r, p);
+        let (v, gb) = normal_equations(&jb, &r, nb);
+        let mut w = vec![0.0; p * nb];
+        for row in 0..m {
+            let a = &jx[row * p..(row + 1) * p];
+            let c = &jb[row * nb..(row + 1) * nb];
+            for i in 0..p {
+                if a[i] == 0.0 {
+                    continue;
+                }
+                for k in 0..nb {
+                    w[i * nb + k] += a[i] * c[k];
+                }
+            }
+        }
+        Block { u, w, gx, v, gb }
+    }
+
+    /// The damped Gauss–Newton step (lengths, then each frame's) by the Schur complement;
+    /// `None` when a system is not positive definite.
+    fn damped_step(
+        &self,
+        blocks: &[Block],
+        v: &[f64],
+        gb: &[f64],
+        mu: f64,
+    ) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
+        let nb = gb.len();
+        let mut s = v.to_vec();
+        for i in 0..nb {
+            s[i * nb + i] += mu * v[i * nb + i].max(1e-9);
+        }
+        let mut rhs = gb.to_vec();
+        // Per frame: U⁻¹ W (column by column) and U⁻¹ gₓ.
+        let mut solved = Vec::with_capacity(blocks.len());
+        for block in blocks {
+            let p = block.gx.len();
+            let mut l = block.u.clone();
+            for i in 0..p {
+                l[i * p + i] += mu * block.u[i * p + i].max(1e-9);
+            }
+            if !cholesky_factor(&mut l, p) {
+                return None;
+            }
+            let mut uw = vec![0.0; p * nb];
+            let mut col = vec![0.0; p];
+            for k in 0..nb {
+                for (i, c) in col.iter_mut().enumerate() {
+                    *c = block.w[i * nb + k];
+                }
+                cholesky_substitute(&l, p, &mut col);
+                for (i, c) in col.iter().enumerate() {
+                    uw[i * nb + k] = *c;
+                }
+            }
+            let mut ug = block.gx.clone();
+            cholesky_substitute(&l, p, &mut ug);
+            // S -= Wᵀ U⁻¹ W; rhs -= Wᵀ U⁻¹ gₓ.
+            for a in 0..nb {
+                for c in 0..nb {
+                    let mut sum = 0.0;
+                    for i in 0..p {
+                        sum += block.w[i * nb + a] * uw[i * nb + c];
+                    }
+                    s[a * nb + c] -= sum;
+                }
+                rhs[a] -= ug
+                    .iter()
+                    .enumerate()
+                    .map(|(i, g)| block.w[i * nb + a] * g)
+                    .sum::<f64>();
+            }
+            solved.push((l, ug));
+        }
+        if !cholesky_factor(&mut s, nb) {
+            return None;
+        }
+        cholesky_substitute(&s, nb, &mut rhs);
+        let db = rhs;
+        // Each frame's step: U⁻¹ (gₓ − W δb).
+        let dx = blocks
+            .iter()
+            .zip(solved)
+            .map(|(block, (l, _))| {
+                let p = block.gx.len();
+                let mut x: Vec<f64> = (0..p)
+                    .map(|i| {
+                        block.gx[i] - (0..nb).map(|k| block.w[i * nb + k] * db[k]).sum::<f64>()
+                    })
+                    .collect();
+                cholesky_substitute(&l, p, &mut x);
+                x
+            })
+            .collect();
+        Some((db, dx))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DMat4, DQuat, DVec2, DVec3};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use skinfield_formats::{Camera, JointDofs};
+
+    use super::*;
+    use crate::synth::character::build_skeleton;
+    use crate::synth::rig::camera_rig;
+    use crate::track::capture::{joint_side_landmark_map, landmarks_of};
+    use crate::track::{Kinematics, Landmark, TrackOptions};
+
+    /// Landmarks of `kinematics` at a pose, projected exactly into every camera.
+    fn detect(
+        kinematics: &Kinematics,
+        landmarks: &[Landmark],
+        cameras: &[Camera],
+        root: DQuat,
+        angles: &[f64],
+        shift: DVec3,
+    ) -> Vec<Vec<Option<Detection>>> {
+        let mut worlds = vec![DMat4::IDENTITY; kinematics.joint_count()];
+        let mut points = vec![DVec3::ZERO; landmarks.len()];
+        kinematics.landmarks(root, angles, landmarks, &mut worlds, &mut points);
+        cameras
+            .iter()
+            .map(|c| {
+                points
+                    .iter()
+                    .map(|p| {
+                        c.project_f64(*p + shift).map(|pixel: DVec2| Detection {
+                            pixel,
+                            confidence: 1.0,
+                        })
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Random angles within 80 % of each Euler joint's limits (free joints: ±0.4 rad).
+    fn random_angles(kinematics: &Kinematics, rng: &mut ChaCha8Rng) -> Vec<f64> {
+        let mut out = Vec::new();
+        for d in kinematics.dofs() {
+            match d {
+                JointDofs::Euler { limits, .. } => {
+                    for l in limits {
+                        let (lo, hi) = (f64::from(l[0]), f64::from(l[1]));
+                        out.push(rng.random_range(lo * 0.8..=hi * 0.8 + 1e-6));
+                    }
+                }
+                other => {
+                    for _ in 0..other.count() {
+                        out.push(rng.random_range(-0.4..0.4));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// A skeleton whose bones differ from the template's is seen by a joint + side-point
+    /// detector in eight frames; the template's skeleton is tracked and calibrated.
+    #[test]
+    fn calibration_recovers_changed_bone_lengths_from_exact_detections() {
+        let skeleton = build_skeleton().unwrap();
+        let template = Kinematics::new(&skeleton);
+        let landmarks: Vec<Landmark> = landmarks_of(&joint_side_landmark_map(&skeleton), &skeleton)
+            .into_iter()
+            .map(|(_, l)| l)
+            .collect();
+        let rig = camera_rig(8, 256, 256, 1);
+        // Upper arms 4 % longer, shins 3 % shorter, one shoulder 5 mm closer to the spine.
+        let mut truth = vec![DVec3::ZERO; skeleton.len()];
+        for (name, change) in [
+            ("l_elbow", 0.04),
+            ("r_elbow", 0.04),
+            ("l_ankle", -0.03),
+            ("r_ankle", -0.03),
+        ] {
+            let j = skeleton.find(name).unwrap();
+            truth[j] = template.bind_translation(j) * change;
+        }
+        let shoulder = skeleton.find("l_shoulder").unwrap();
+        truth[shoulder] = template.bind_translation(shoulder).normalize() * -0.005;
+        let person = template.clone().with_bone_offsets(&truth);
+
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let frames: Vec<_> = (0..8)
+            .map(|_| {
+                let root = DQuat::from_rotation_y(rng.random_range(-3.0..3.0));
+                let angles = random_angles(&template, &mut rng);
+                let shift = DVec3::new(rng.random_range(-0.2..0.2), 0.0, 0.1);
+                detect(&person, &landmarks, &rig.cameras, root, &angles, shift)
+            })
+            .collect();
+        let tracker = Tracker::new(
+            template,
+            landmarks,
+            &rig.cameras,
+            DVec3::Y,
+            TrackOptions::default(),
+        );
+        let fits: Vec<FrameFit> = frames
+            .iter()
+            .map(|d| tracker.fit(d, None).unwrap())
+            .collect();
+        let pairs: Vec<_> = frames.iter().map(Vec::as_slice).zip(&fits).collect();
+        let calibration = tracker.calibrate_bones(&pairs).unwrap();
+
+        let worst = calibration
+            .offsets
+            .iter()
+            .zip(&truth)
+            .map(|(o, t)| o.distance(*t))
+            .fold(0.0, f64::max);
+        // The largest change is 1.2 cm (a shin); the prior pulls by about 0.1 % of it.
+        assert!(
+            worst < 3e-5,
+            "worst offset error {worst} m: {calibration:?}"
+        );
+        assert!(
+            calibration.rms_before_px > 0.2 && calibration.rms_after_px < 1e-3,
+            "{calibration:?}"
+        );
+        // Refitted on the calibrated skeleton, every frame explains its detections exactly.
+        let calibrated = tracker.clone().with_bone_offsets(&calibration.offsets);
+        for d in &frames {
+            let before = tracker.fit(d, None).unwrap().report.rms_inlier_px;
+            let after = calibrated.fit(d, None).unwrap().report.rms_inlier_px;
+            assert!(after < 1e-3 && before > 0.05, "{before} → {after} px");
+        }
+    }
+
+    #[test]
+    fn calibration_leaves_a_true_skeleton_alone_and_names_bad_detections() {
+        let skeleton = build_skeleton().unwrap();
+        let kinematics = Kinematics::new(&skeleton);
+        let landmarks: Vec<Landmark> = landmarks_of(&joint_side_landmark_map(&skeleton), &skeleton)
+            .into_iter()
+            .map(|(_, l)| l)
+            .collect();
+        let rig = camera_rig(6, 256, 256, 1);
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let frames: Vec<_> = (0..4)
+            .map(|_| {
+                let angles = random_angles(&kinematics, &mut rng);
+                detect(
+                    &kinematics,
+                    &landmarks,
+                    &rig.cameras,
+                    DQuat::from_rotation_y(rng.random_range(-3.0..3.0)),
+                    &angles,
+                    DVec3::ZERO,
+                )
+            })
+            .collect();
+        let tracker = Tracker::new(
+            kinematics,
+            landmarks,
+            &rig.cameras,
+            DVec3::Y,
+            TrackOptions::default(),
+        );
+        let fits: Vec<FrameFit> = frames
+            .iter()
+            .map(|d| tracker.fit(d, None).unwrap())
+            .collect();
+        let pairs: Vec<_> = frames.iter().map(Vec::as_slice).zip(&fits).collect();
+        let calibration = tracker.calibrate_bones(&pairs).unwrap();
+        let largest = calibration
+            .offsets
+            .iter()
+            .map(|o| o.length())
+            .fold(0.0, f64::max);
+        assert!(largest < 1e-6, "{calibration:?}");
+
+        // A frame with a landmark slot too few in one view is refused with the view named.
+        let mut short = frames[1].clone();
+        short[2].pop();
+        let pairs = [
+            (frames[0].as_slice(), &fits[0]),
+            (short.as_slice(), &fits[1]),
+        ];
+        let err = tracker.calibrate_bones(&pairs).unwrap_err();
+        assert!(
+            matches!(err, TrackError::LandmarkCount { view: 2, .. }),
+            "{err}"
+        );
+    }
+}
