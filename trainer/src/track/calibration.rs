@@ -453,77 +453,71 @@ impl Tracker<'_> {
 
 #[cfg(test)]
 mod tests {
-    use glam::{DMat4, DQuat, DVec2, DVec3};
+    use glam::{DMat4, DQuat, DVec3};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use skinfield_formats::{Camera, JointDofs};
+    use skinfield_formats::{Camera, Skeleton};
 
     use super::*;
     use crate::synth::character::build_skeleton;
     use crate::synth::rig::camera_rig;
     use crate::track::capture::{joint_side_landmark_map, landmarks_of};
+    use crate::track::tests::{exact_detections, random_angles};
     use crate::track::{Kinematics, Landmark, TrackOptions};
 
-    /// Landmarks of `kinematics` at a pose, projected exactly into every camera.
-    fn detect(
-        kinematics: &Kinematics,
-        landmarks: &[Landmark],
-        cameras: &[Camera],
-        root: DQuat,
-        angles: &[f64],
-        shift: DVec3,
-    ) -> Vec<Vec<Option<Detection>>> {
-        let mut worlds = vec![DMat4::IDENTITY; kinematics.joint_count()];
+    /// Detections of every frame, one row per view.
+    type Frames = Vec<Vec<Vec<Option<Detection>>>>;
+
+    /// Exact detections by a joint + side-point detector of `person` (the built-in skeleton with
+    /// changed bones) in `frames` random poses, and the template skeleton's tracker with its
+    /// fits of them.
+    fn track<'a>(
+        skeleton: &Skeleton,
+        person: &Kinematics,
+        cameras: &'a [Camera],
+        frames: usize,
+        seed: u64,
+    ) -> (Tracker<'a>, Frames, Vec<FrameFit>) {
+        let landmarks: Vec<Landmark> = landmarks_of(&joint_side_landmark_map(skeleton), skeleton)
+            .into_iter()
+            .map(|(_, l)| l)
+            .collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut worlds = vec![DMat4::IDENTITY; skeleton.len()];
         let mut points = vec![DVec3::ZERO; landmarks.len()];
-        kinematics.landmarks(root, angles, landmarks, &mut worlds, &mut points);
-        cameras
-            .iter()
-            .map(|c| {
-                points
+        let detections: Vec<_> = (0..frames)
+            .map(|_| {
+                let root = DQuat::from_rotation_y(rng.random_range(-3.0..3.0));
+                let angles: Vec<f64> = random_angles(skeleton, &mut rng)
                     .iter()
-                    .map(|p| {
-                        c.project_f64(*p + shift).map(|pixel: DVec2| Detection {
-                            pixel,
-                            confidence: 1.0,
-                        })
-                    })
-                    .collect()
+                    .map(|&a| f64::from(a))
+                    .collect();
+                let shift = DVec3::new(rng.random_range(-0.2..0.2), 0.0, 0.1);
+                person.landmarks(root, &angles, &landmarks, &mut worlds, &mut points);
+                let world: Vec<DVec3> = points.iter().map(|p| *p + shift).collect();
+                exact_detections(cameras, &world, 1.0)
             })
-            .collect()
+            .collect();
+        let tracker = Tracker::new(
+            Kinematics::new(skeleton),
+            landmarks,
+            cameras,
+            DVec3::Y,
+            TrackOptions::default(),
+        );
+        let fits = detections
+            .iter()
+            .map(|d| tracker.fit(d, None).unwrap())
+            .collect();
+        (tracker, detections, fits)
     }
 
-    /// Random angles within 80 % of each Euler joint's limits (free joints: ±0.4 rad).
-    fn random_angles(kinematics: &Kinematics, rng: &mut ChaCha8Rng) -> Vec<f64> {
-        let mut out = Vec::new();
-        for d in kinematics.dofs() {
-            match d {
-                JointDofs::Euler { limits, .. } => {
-                    for l in limits {
-                        let (lo, hi) = (f64::from(l[0]), f64::from(l[1]));
-                        out.push(rng.random_range(lo * 0.8..=hi * 0.8 + 1e-6));
-                    }
-                }
-                other => {
-                    for _ in 0..other.count() {
-                        out.push(rng.random_range(-0.4..0.4));
-                    }
-                }
-            }
-        }
-        out
-    }
-
-    /// A skeleton whose bones differ from the template's is seen by a joint + side-point
-    /// detector in eight frames; the template's skeleton is tracked and calibrated.
+    /// A skeleton whose bones differ from the template's is seen in eight frames; the
+    /// template's skeleton is tracked and calibrated.
     #[test]
     fn calibration_recovers_changed_bone_lengths_from_exact_detections() {
         let skeleton = build_skeleton().unwrap();
         let template = Kinematics::new(&skeleton);
-        let landmarks: Vec<Landmark> = landmarks_of(&joint_side_landmark_map(&skeleton), &skeleton)
-            .into_iter()
-            .map(|(_, l)| l)
-            .collect();
-        let rig = camera_rig(8, 256, 256, 1);
         // Upper arms 4 % longer, shins 3 % shorter, one shoulder 5 mm closer to the spine.
         let mut truth = vec![DVec3::ZERO; skeleton.len()];
         for (name, change) in [
@@ -537,28 +531,9 @@ mod tests {
         }
         let shoulder = skeleton.find("l_shoulder").unwrap();
         truth[shoulder] = template.bind_translation(shoulder).normalize() * -0.005;
-        let person = template.clone().with_bone_offsets(&truth);
-
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let frames: Vec<_> = (0..8)
-            .map(|_| {
-                let root = DQuat::from_rotation_y(rng.random_range(-3.0..3.0));
-                let angles = random_angles(&template, &mut rng);
-                let shift = DVec3::new(rng.random_range(-0.2..0.2), 0.0, 0.1);
-                detect(&person, &landmarks, &rig.cameras, root, &angles, shift)
-            })
-            .collect();
-        let tracker = Tracker::new(
-            template,
-            landmarks,
-            &rig.cameras,
-            DVec3::Y,
-            TrackOptions::default(),
-        );
-        let fits: Vec<FrameFit> = frames
-            .iter()
-            .map(|d| tracker.fit(d, None).unwrap())
-            .collect();
+        let person = template.with_bone_offsets(&truth);
+        let rig = camera_rig(8, 256, 256, 1);
+        let (tracker, frames, fits) = track(&skeleton, &person, &rig.cameras, 8, 3);
         let pairs: Vec<_> = frames.iter().map(Vec::as_slice).zip(&fits).collect();
         let calibration = tracker.calibrate_bones(&pairs).unwrap();
 
@@ -589,37 +564,9 @@ mod tests {
     #[test]
     fn calibration_leaves_a_true_skeleton_alone_and_names_bad_detections() {
         let skeleton = build_skeleton().unwrap();
-        let kinematics = Kinematics::new(&skeleton);
-        let landmarks: Vec<Landmark> = landmarks_of(&joint_side_landmark_map(&skeleton), &skeleton)
-            .into_iter()
-            .map(|(_, l)| l)
-            .collect();
         let rig = camera_rig(6, 256, 256, 1);
-        let mut rng = ChaCha8Rng::seed_from_u64(8);
-        let frames: Vec<_> = (0..4)
-            .map(|_| {
-                let angles = random_angles(&kinematics, &mut rng);
-                detect(
-                    &kinematics,
-                    &landmarks,
-                    &rig.cameras,
-                    DQuat::from_rotation_y(rng.random_range(-3.0..3.0)),
-                    &angles,
-                    DVec3::ZERO,
-                )
-            })
-            .collect();
-        let tracker = Tracker::new(
-            kinematics,
-            landmarks,
-            &rig.cameras,
-            DVec3::Y,
-            TrackOptions::default(),
-        );
-        let fits: Vec<FrameFit> = frames
-            .iter()
-            .map(|d| tracker.fit(d, None).unwrap())
-            .collect();
+        let (tracker, frames, fits) =
+            track(&skeleton, &Kinematics::new(&skeleton), &rig.cameras, 4, 8);
         let pairs: Vec<_> = frames.iter().map(Vec::as_slice).zip(&fits).collect();
         let calibration = tracker.calibrate_bones(&pairs).unwrap();
         let largest = calibration

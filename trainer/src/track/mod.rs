@@ -23,7 +23,7 @@ pub use kinematics::{Kinematics, Landmark};
 pub use solve::{Detection, FrameFit, FrameReport, TrackError, TrackOptions, Tracker};
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use glam::{DMat4, DQuat, DVec3, Mat4, Quat};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -34,7 +34,7 @@ mod tests {
     use crate::synth::rig::camera_rig;
 
     /// Random angles within each Euler joint's limits (Free joints: up to 0.5 rad).
-    fn random_angles(skeleton: &Skeleton, rng: &mut ChaCha8Rng) -> Vec<f32> {
+    pub(crate) fn random_angles(skeleton: &Skeleton, rng: &mut ChaCha8Rng) -> Vec<f32> {
         let mut out = Vec::new();
         for d in skeleton.dofs() {
             match d {
@@ -54,7 +54,7 @@ mod tests {
     }
 
     /// Every point projected into every camera, exactly, with one confidence.
-    fn exact_detections(
+    pub(crate) fn exact_detections(
         cameras: &[Camera],
         points: &[DVec3],
         confidence: f64,

@@ -346,15 +346,7 @@ impl<'a> Tracker<'a> {
         params.extend_from_slice(&fit.angles);
         let mut ws = Workspace::new(self, obs.len());
         let unit = vec![1.0; obs.len()];
-        let plain = Problem {
-            tracker: self,
-            obs,
-            robust: &unit,
-            hierarchical: false,
-            root0,
-            previous,
-            silhouette: None,
-        };
+        let plain = Problem::keypoints(self, obs, &unit, root0, previous);
         let robust = self.robust_weights(
             &plain.errors(&params, &mut ws),
             self.options.robust_scale_px,
@@ -480,15 +472,7 @@ impl<'a> Tracker<'a> {
         iterations: usize,
     ) -> FrameFit {
         let mut ctx = Workspace::new(self, obs.len());
-        let problem = Problem {
-            tracker: self,
-            obs,
-            robust,
-            hierarchical: false,
-            root0,
-            previous,
-            silhouette: None,
-        };
+        let problem = Problem::keypoints(self, obs, robust, root0, previous);
         let errors = problem.errors(params, &mut ctx);
         let (root, shift) = problem.root_and_shift(params, &mut ctx);
         let inl: Vec<f64> = errors
@@ -541,15 +525,7 @@ impl<'a> Tracker<'a> {
         params: &[f64],
         out: &mut [f64],
     ) {
-        let problem = Problem {
-            tracker: self,
-            obs,
-            robust,
-            hierarchical: false,
-            root0,
-            previous: None,
-            silhouette: None,
-        };
+        let problem = Problem::keypoints(self, obs, robust, root0, None);
         let mut ws = Workspace::new(self, obs.len());
         problem.residuals(params, &mut ws, out);
     }
@@ -617,7 +593,27 @@ impl SilhouetteTerm<'_> {
     }
 }
 
-impl Problem<'_, '_> {
+impl<'t, 'a> Problem<'t, 'a> {
+    /// The keypoint and limit terms (with the temporal term when `previous` is given) under
+    /// the fixed weights `robust`, without the hierarchical weights or the silhouette term.
+    fn keypoints(
+        tracker: &'t Tracker<'a>,
+        obs: &'t [Observation],
+        robust: &'t [f64],
+        root0: DQuat,
+        previous: Option<&'t FrameFit>,
+    ) -> Self {
+        Self {
+            tracker,
+            obs,
+            robust,
+            hierarchical: false,
+            root0,
+            previous,
+            silhouette: None,
+        }
+    }
+
     fn keypoint_weight(&self, o: &Observation, robust: f64) -> f64 {
         let lambda = if self.hierarchical {
             1.0 / (1.0 + self.tracker.depth[o.landmark] as f64)
