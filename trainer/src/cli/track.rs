@@ -54,6 +54,10 @@ pub struct Args {
     /// template's bones. Writes `bones.csv` (each joint's offset along its bone).
     #[arg(long, default_value_t = TrackOptions::default().calibration_rounds)]
     pub calibration_rounds: usize,
+    /// Joints whose local translation is fitted per frame (comma-separated names), for rigs
+    /// whose animation translates them, such as inverse-kinematics feet parented to the root.
+    #[arg(long, value_delimiter = ',')]
+    pub translating_joints: Vec<String>,
     /// Weights of the silhouette term's body: `initial` (the capture's, bone heat when it ships
     /// none), `static:FILE` (`trainer train --static`), `skf:FILE` (SkinNet at the bind pose) or
     /// `oracle` (the capture's true weights; a ceiling for experiments).
@@ -158,6 +162,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         robust_scale_px: args.robust_px,
         silhouette_weight: args.silhouette_weight,
         calibration_rounds: args.calibration_rounds,
+        translating_joints: args.translating_joints.clone(),
         ..TrackOptions::default()
     };
     let body_skin = match &args.body_weights {

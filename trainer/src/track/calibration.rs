@@ -173,9 +173,12 @@ impl Tracker<'_> {
                 params,
             });
         }
+        // A joint that translates per frame has no fixed length.
+        let translating = self.kinematics.translating_joints();
         let lengths = Lengths {
             movable: (0..self.kinematics.joint_count())
                 .filter(|&j| self.kinematics.parents()[j].is_some())
+                .filter(|j| !translating.contains(j))
                 .filter_map(|j| {
                     let bone = self.kinematics.bind_translation(j);
                     (bone.length() > 1e-12).then(|| (j, bone.normalize()))

@@ -33,6 +33,9 @@ pub enum CaptureTrackError {
         /// Why.
         source: TrackError,
     },
+    /// A joint asked to translate is not a non-root joint of the skeleton.
+    #[error("translating joint `{0}`: the skeleton has no such non-root joint")]
+    TranslatingJoint(String),
     /// The skeleton calibration failed.
     #[error("skeleton calibration: {0}")]
     Calibration(TrackError),
@@ -324,8 +327,19 @@ pub fn track_capture(
         }
         detections.push(views);
     }
+    let translating = options
+        .translating_joints
+        .iter()
+        .map(|name| {
+            capture
+                .skeleton
+                .find(name)
+                .filter(|&j| capture.skeleton.parents()[j].is_some())
+                .ok_or_else(|| CaptureTrackError::TranslatingJoint(name.clone()))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let mut tracker = Tracker::new(
-        Kinematics::new(&capture.skeleton),
+        Kinematics::new(&capture.skeleton).with_translating_joints(&translating),
         landmarks.iter().map(|(_, l)| *l).collect(),
         &capture.rig.cameras,
         capture.up_axis.unit().as_dvec3(),

@@ -33,6 +33,11 @@ pub struct Kinematics {
     /// Calibrated change of each joint's bind-pose local translation (zero for the roots, whose
     /// translation the alignment layer supplies); see [`super::calibration`].
     bone_offsets: Vec<DVec3>,
+    /// Per joint, the index of its per-frame translation among the translating joints
+    /// ([`Self::with_translating_joints`]).
+    translation_slot: Vec<Option<usize>>,
+    /// Skeleton units per unit of a translation parameter (10 % of the bind-pose size).
+    translation_unit: f64,
 }
 
 /// Rotation of one joint's degrees of freedom, in f64 (`JointDofs::rotation` widened).
@@ -83,7 +88,65 @@ impl Kinematics {
             base: skeleton.base().as_dmat4(),
             angle_count: skeleton.angle_count(),
             bone_offsets: vec![DVec3::ZERO; skeleton.len()],
+            translation_slot: vec![None; skeleton.len()],
+            translation_unit: 1.0,
         }
+        .with_translation_unit()
+    }
+
+    fn with_translation_unit(mut self) -> Self {
+        self.translation_unit = 0.1 * self.bind_size();
+        self
+    }
+
+    /// The layer with a per-frame translation for each of `joints` (non-root joint indices;
+    /// the roots' translation is the alignment layer's), for rigs whose animation moves joints
+    /// by translation, such as inverse-kinematics feet parented to the root. Each adds three
+    /// parameters after the angles ([`Self::param_count`]): the joint's local translation minus
+    /// its bind-pose one, in units of 10 % of the skeleton's bind-pose size.
+    ///
+    /// # Panics
+    /// If a joint index is out of range.
+    #[must_use]
+    pub fn with_translating_joints(mut self, joints: &[usize]) -> Self {
+        self.translation_slot = vec![None; self.parents.len()];
+        let mut k = 0;
+        for &j in joints {
+            if self.parents[j].is_some() && self.translation_slot[j].is_none() {
+                self.translation_slot[j] = Some(k);
+                k += 1;
+            }
+        }
+        self
+    }
+
+    /// The joints with a per-frame translation, in parameter order.
+    #[must_use]
+    pub fn translating_joints(&self) -> Vec<usize> {
+        let mut joints: Vec<(usize, usize)> = self
+            .translation_slot
+            .iter()
+            .enumerate()
+            .filter_map(|(j, s)| s.map(|s| (s, j)))
+            .collect();
+        joints.sort_unstable();
+        joints.into_iter().map(|(_, j)| j).collect()
+    }
+
+    /// Parameters of a pose after the root rotation: the joint angles, then three per
+    /// translating joint.
+    #[must_use]
+    pub fn param_count(&self) -> usize {
+        self.angle_count + 3 * self.translation_slot.iter().flatten().count()
+    }
+
+    /// The local translation change of translating joint `j` under `params` (zero for the
+    /// others).
+    fn translation(&self, j: usize, params: &[f64]) -> DVec3 {
+        self.translation_slot[j].map_or(DVec3::ZERO, |k| {
+            let i = self.angle_count + 3 * k;
+            DVec3::from_slice(&params[i..i + 3]) * self.translation_unit
+        })
     }
 
     /// The layer with every joint's bind-pose local translation moved by `offsets` (one per
@@ -132,7 +195,11 @@ impl Kinematics {
     #[must_use]
     pub fn bind_size(&self) -> f64 {
         let mut worlds = vec![DMat4::IDENTITY; self.parents.len()];
-        self.world_matrices(DQuat::IDENTITY, &vec![0.0; self.angle_count], &mut worlds);
+        let base = Self {
+            translation_slot: vec![None; self.parents.len()],
+            ..self.clone()
+        };
+        base.world_matrices(DQuat::IDENTITY, &vec![0.0; self.angle_count], &mut worlds);
         let (lo, hi) = worlds.iter().fold(
             (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |(lo, hi), w| {
@@ -167,8 +234,9 @@ impl Kinematics {
         &self.parents
     }
 
-    /// World matrix of every joint for a root rotation and joint angles, root translation zero,
-    /// into `out` (joint count).
+    /// World matrix of every joint for a root rotation and joint angles (the
+    /// [`Self::param_count`] parameters: angles, then translations), root translation zero, into
+    /// `out` (joint count).
     pub fn world_matrices(&self, root_rotation: DQuat, angles: &[f64], out: &mut [DMat4]) {
         let mut k = 0;
         for j in 0..self.parents.len() {
@@ -179,7 +247,8 @@ impl Kinematics {
             if self.parents[j].is_none() {
                 r = (root_rotation * r).normalize();
             }
-            let local = DMat4::from_scale_rotation_translation(s, r, t + self.bone_offsets[j]);
+            let t = t + self.bone_offsets[j] + self.translation(j, angles);
+            let local = DMat4::from_scale_rotation_translation(s, r, t);
             out[j] = match self.parents[j] {
                 Some(p) => out[p] * local,
                 None => self.base * local,
@@ -216,8 +285,9 @@ impl Kinematics {
         self.base.inverse().transform_vector3(world)
     }
 
-    /// The [`Pose`] (f32) of a root rotation, a world-space shift and joint angles, with the
-    /// bone offsets in the joints' local translations.
+    /// The [`Pose`] (f32) of a root rotation, a world-space shift and the pose parameters
+    /// ([`Self::param_count`]), with the bone offsets and the translating joints' translations
+    /// in the joints' local translations.
     pub fn pose(
         &self,
         skeleton: &Skeleton,
@@ -225,12 +295,15 @@ impl Kinematics {
         world_shift: DVec3,
         angles: &[f64],
     ) -> Result<Pose, SkeletonError> {
-        let a: Vec<f32> = angles.iter().map(|&x| x as f32).collect();
+        let a: Vec<f32> = angles[..self.angle_count]
+            .iter()
+            .map(|&x| x as f32)
+            .collect();
         let t: Vec3 = self.root_translation_for(world_shift).as_vec3();
         let q: Quat = root_rotation.as_quat();
         let mut pose = skeleton.pose_from_angles(q, t, &a)?;
-        for (local, offset) in pose.locals.iter_mut().zip(&self.bone_offsets) {
-            local.translation += offset.as_vec3();
+        for (j, (local, offset)) in pose.locals.iter_mut().zip(&self.bone_offsets).enumerate() {
+            local.translation += (*offset + self.translation(j, angles)).as_vec3();
         }
         Ok(pose)
     }

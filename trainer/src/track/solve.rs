@@ -69,6 +69,10 @@ pub struct TrackOptions {
     /// noise (about 2 mm per bone) costs as much as the 3 mm mismatch it removes
     /// (`docs/experiments/tracking.md`).
     pub calibration_rounds: usize,
+    /// Joints (by name) whose local translation is fitted per frame, for rigs whose animation
+    /// translates them (inverse-kinematics feet parented to the root, a pelvis moved relative
+    /// to a root that stays put); see [`Kinematics::with_translating_joints`].
+    pub translating_joints: Vec<String>,
 }
 
 impl Default for TrackOptions {
@@ -84,6 +88,7 @@ impl Default for TrackOptions {
             headings: 8,
             silhouette_weight: 1.0,
             calibration_rounds: 0,
+            translating_joints: Vec::new(),
         }
     }
 }
@@ -95,7 +100,8 @@ pub struct FrameFit {
     pub root_rotation: DQuat,
     /// World-space shift of the skeleton from the alignment layer.
     pub world_shift: DVec3,
-    /// Joint angles (`Skeleton::angle_count`).
+    /// The pose parameters ([`Kinematics::param_count`]): the joint angles
+    /// (`Skeleton::angle_count`), then the translating joints' translations.
     pub angles: Vec<f64>,
     /// Per-frame report.
     pub report: FrameReport,
@@ -182,6 +188,9 @@ pub struct Tracker<'a> {
     body: Option<&'a TrackingBody>,
 }
 
+/// Weight of the pull of a translating joint's translation towards the bind pose: px² per
+/// (10 % of the skeleton's size)² ([`Kinematics::with_translating_joints`]).
+pub const TRANSLATION_PRIOR: f64 = 1.0;
 /// A detection this many final robust scales off counts as far ([`FrameReport::far`]).
 pub const FAR_FACTOR: f64 = 5.0;
 /// Projection when a point falls behind a camera: a constant far from any image, so the
@@ -309,7 +318,7 @@ impl<'a> Tracker<'a> {
         if obs.len() < 2 {
             return Err(TrackError::TooFewDetections(obs.len()));
         }
-        let a = self.kinematics.angle_count();
+        let a = self.kinematics.param_count();
         let headings = || -> Vec<(DQuat, Vec<f64>)> {
             let h = self.options.headings.max(1);
             (0..h)
@@ -418,7 +427,7 @@ impl<'a> Tracker<'a> {
         angles0: Vec<f64>,
         previous: Option<&FrameFit>,
     ) -> Result<(f64, FrameFit), TrackError> {
-        let a = self.kinematics.angle_count();
+        let a = self.kinematics.param_count();
         let n = 3 + a;
         let mut params = vec![0.0; n];
         params[3..].copy_from_slice(&angles0);
@@ -510,7 +519,7 @@ impl<'a> Tracker<'a> {
 
     /// Number of [`Self::frame_residuals`] entries for `obs`.
     pub(super) fn frame_residual_count(&self, obs: &[Observation]) -> usize {
-        2 * obs.len() + self.kinematics.angle_count()
+        2 * obs.len() + self.kinematics.param_count()
     }
 
     /// One frame's keypoint residuals (Eq. 6 under the fixed weights `robust`) and joint-limit
@@ -665,7 +674,7 @@ impl<'t, 'a> Problem<'t, 'a> {
     }
 
     fn residual_count(&self) -> usize {
-        let a = self.tracker.kinematics.angle_count();
+        let a = self.tracker.kinematics.param_count();
         let temporal = if self.previous.is_some() { 3 + a } else { 0 };
         let silhouette = self.silhouette.map_or(0, SilhouetteTerm::count);
         2 * self.obs.len() + a + temporal + silhouette
@@ -692,8 +701,8 @@ impl<'t, 'a> Problem<'t, 'a> {
         (sum / term.count().max(1) as f64).sqrt()
     }
 
-    /// The residual vector: weighted reprojection errors (Eq. 6), limit excesses (Eq. 7),
-    /// temporal changes.
+    /// The residual vector: weighted reprojection errors (Eq. 6), limit excesses (Eq. 7) and
+    /// the translating joints' prior, temporal changes, outline distances.
     fn residuals(&self, params: &[f64], ws: &mut Workspace, out: &mut [f64]) {
         let t = self.tracker;
         let (root, shift) = self.root_and_shift(params, ws);
@@ -740,6 +749,13 @@ impl<'t, 'a> Problem<'t, 'a> {
                     }
                 }
             }
+        }
+        // The translating joints: a weak pull towards the bind pose, which settles what the
+        // alignment layer's shift of the whole skeleton could equally explain.
+        let tw = TRANSLATION_PRIOR.sqrt();
+        for x in &angles[a..] {
+            out[k] = tw * x;
+            k += 1;
         }
         if let Some(p) = self.previous {
             let sw = t.options.smooth_weight.sqrt();
