@@ -12,21 +12,25 @@
 //! or shortened along itself) and the poses of up to [`MAX_CALIBRATION_FRAMES`] frames spread
 //! over the capture minimise together the frames' keypoint losses (confidence- and
 //! robust-weighted reprojection errors, Eq. 6, and the joint-limit prior, Eq. 7; no temporal
-//! term, so the frames are independent given the lengths). Together, not in alternation:
-//! with the poses held, the fits have already absorbed the lengths' error into the angles, and
-//! alternating recovered half of CesiumMan's shoulders in four rounds. The normal equations
-//! have the bundle-adjustment structure (a block per frame, coupled only through the lengths),
-//! solved by the Schur complement on the lengths: Levenberg–Marquardt with a central-difference
-//! Jacobian, the robust (Geman–McClure) weights at the tracker's final scale recomputed once. Only lengths: an offset across a
-//! bone is, but for the side points, a constant turn of its parent, which the per-frame angles
-//! already have; free 3D offsets traded with those turns on CesiumMan (exact detections: the
-//! elbows moved 2 mm across their bones while the shoulders' 3 mm came back as 2.5 mm), while
-//! lengths are what a person's skeleton differs in. Each frame's root translation comes from
-//! the alignment layer at every evaluation, so a length a root translation can explain (a bone
-//! from a root that does not turn) stays with the root. A weak quadratic prior, [`BONE_PRIOR`]
-//! px² per (1 % of the skeleton's size)², keeps lengths the detections do not see at the
-//! template's and makes the problem well posed. Levenberg–Marquardt with a central-difference
-//! Jacobian, the robust (Geman–McClure) weights at the tracker's final scale recomputed once.
+//! term, so the frames are independent given the lengths), plus a weak quadratic prior,
+//! [`BONE_PRIOR`] px² per (1 % of the skeleton's size)², that keeps lengths the detections do
+//! not see at the template's and makes the problem well posed.
+//!
+//! - *Together, not in alternation*: with the poses held, the fits have already absorbed the
+//!   lengths' error into the angles; alternating recovered half of CesiumMan's shoulders in
+//!   four rounds. The normal equations have the bundle-adjustment structure (a block per
+//!   frame, coupled only through the lengths), solved by the Schur complement on the lengths:
+//!   Levenberg–Marquardt with a central-difference Jacobian, the robust (Geman–McClure) weights
+//!   at the tracker's final scale recomputed once.
+//! - *Only lengths*: an offset across a bone is, but for the side points, a constant turn of
+//!   its parent, which the per-frame angles already have. Free 3D offsets traded with those
+//!   turns on CesiumMan (exact detections: the elbows moved 2 mm across their bones while the
+//!   shoulders' 3 mm came back as 2.5 mm), and lengths are what a person's skeleton differs in.
+//! - Each frame's root translation comes from the alignment layer at every evaluation, so a
+//!   length a root translation can explain (a bone from a root that does not turn) stays with
+//!   the root. Translating joints ([`super::Kinematics::with_translating_joints`]) have no
+//!   length.
+//!
 //! `track_capture` fits the frames to the keypoints, calibrates, and fits again (with the
 //! temporal and silhouette terms) on the calibrated skeleton.
 
