@@ -7,8 +7,9 @@ use common::trainer;
 use skinfield_formats::capture::load_capture;
 use skinfield_trainer::train::validation::held_out_indices;
 
-/// `trainer synth` of a one-frame built-in capture with keypoints into `out`, plus `extra`.
-fn tiny_synth_with_keypoints(out: &str, extra: &[&str]) -> (i32, String, String) {
+/// `trainer synth` of a small built-in capture into `out` (`train_frames` training frames, one
+/// test frame), plus `extra`.
+fn tiny_synth(out: &str, train_frames: &str, extra: &[&str]) -> (i32, String, String) {
     let mut args = vec![
         "synth",
         "--out",
@@ -18,10 +19,9 @@ fn tiny_synth_with_keypoints(out: &str, extra: &[&str]) -> (i32, String, String)
         "--vertices",
         "2500",
         "--train-frames",
-        "1",
+        train_frames,
         "--test-frames",
         "1",
-        "--keypoints",
     ];
     args.extend_from_slice(extra);
     trainer(&args)
@@ -32,7 +32,11 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("cap");
     let c = cap.to_str().unwrap();
-    let (code, _, err) = tiny_synth_with_keypoints(c, &["--cameras", "4", "--resolution", "48"]);
+    let (code, _, err) = tiny_synth(
+        c,
+        "1",
+        &["--keypoints", "--cameras", "4", "--resolution", "48"],
+    );
     assert_eq!(code, 0, "{err}");
     let truth = load_capture(&cap).unwrap().poses;
     // Drop the motion, as a capture from video and a 2D detector would come.
@@ -97,9 +101,11 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
 fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("cap");
-    let (code, _, err) = tiny_synth_with_keypoints(
+    let (code, _, err) = tiny_synth(
         cap.to_str().unwrap(),
+        "1",
         &[
+            "--keypoints",
             "--cameras",
             "2",
             "--resolution",
@@ -125,23 +131,7 @@ fn train_refine_poses_writes_the_corrected_training_motion() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("cap");
     let c = cap.to_str().unwrap();
-    let (code, _, err) = trainer(&[
-        "synth",
-        "--out",
-        c,
-        "--grid",
-        "40",
-        "--vertices",
-        "2500",
-        "--train-frames",
-        "2",
-        "--test-frames",
-        "1",
-        "--cameras",
-        "4",
-        "--resolution",
-        "48",
-    ]);
+    let (code, _, err) = tiny_synth(c, "2", &["--cameras", "4", "--resolution", "48"]);
     assert_eq!(code, 0, "{err}");
     let capture = load_capture(&cap).unwrap();
     let config = tmp.path().join("c.json");

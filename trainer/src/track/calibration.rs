@@ -116,20 +116,10 @@ impl Frame {
         (sum, weight)
     }
 
-    /// Geman–McClure weights of the reprojection errors at `params` (from residuals computed
-    /// with unit robust weights).
+    /// Geman–McClure weights, at the tracker's final scale, of the reprojection errors at the
+    /// frame's parameters.
     fn reweigh(&mut self, tracker: &Tracker<'_>) {
-        self.robust = vec![1.0; self.obs.len()];
-        let r = self.residuals(tracker, &self.params);
-        let errors: Vec<f64> = self
-            .obs
-            .iter()
-            .enumerate()
-            .map(|(i, o)| {
-                let e = DVec3::new(r[2 * i], r[2 * i + 1], 0.0).length();
-                e / o.confidence.max(1e-12).sqrt()
-            })
-            .collect();
+        let errors = tracker.frame_errors(&self.obs, self.root0, &self.params);
         self.robust = tracker.robust_weights(&errors, tracker.options.robust_scale_px);
     }
 }

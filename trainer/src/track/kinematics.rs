@@ -71,7 +71,7 @@ impl Kinematics {
     /// Widens `skeleton` to f64.
     #[must_use]
     pub fn new(skeleton: &Skeleton) -> Self {
-        Self {
+        let mut kinematics = Self {
             parents: skeleton.parents().to_vec(),
             dofs: skeleton.dofs().to_vec(),
             bind: skeleton
@@ -89,14 +89,10 @@ impl Kinematics {
             angle_count: skeleton.angle_count(),
             bone_offsets: vec![DVec3::ZERO; skeleton.len()],
             translation_slot: vec![None; skeleton.len()],
-            translation_unit: 1.0,
-        }
-        .with_translation_unit()
-    }
-
-    fn with_translation_unit(mut self) -> Self {
-        self.translation_unit = 0.1 * self.bind_size();
-        self
+            translation_unit: 0.0,
+        };
+        kinematics.translation_unit = 0.1 * kinematics.bind_size();
+        kinematics
     }
 
     /// The layer with a per-frame translation for each of `joints` (non-root joint indices;
@@ -157,15 +153,6 @@ impl Kinematics {
     /// If `offsets` does not have one entry per joint.
     #[must_use]
     pub fn with_bone_offsets(mut self, offsets: &[DVec3]) -> Self {
-        self.set_bone_offsets(offsets);
-        self
-    }
-
-    /// [`Self::with_bone_offsets`] in place.
-    ///
-    /// # Panics
-    /// If `offsets` does not have one entry per joint.
-    pub fn set_bone_offsets(&mut self, offsets: &[DVec3]) {
         assert_eq!(
             offsets.len(),
             self.parents.len(),
@@ -174,6 +161,7 @@ impl Kinematics {
         for ((o, new), parent) in self.bone_offsets.iter_mut().zip(offsets).zip(&self.parents) {
             *o = if parent.is_some() { *new } else { DVec3::ZERO };
         }
+        self
     }
 
     /// Joint `j`'s bind-pose local translation (its bone, in the parent's frame, before any
@@ -195,11 +183,7 @@ impl Kinematics {
     #[must_use]
     pub fn bind_size(&self) -> f64 {
         let mut worlds = vec![DMat4::IDENTITY; self.parents.len()];
-        let base = Self {
-            translation_slot: vec![None; self.parents.len()],
-            ..self.clone()
-        };
-        base.world_matrices(DQuat::IDENTITY, &vec![0.0; self.angle_count], &mut worlds);
+        self.world_matrices(DQuat::IDENTITY, &vec![0.0; self.param_count()], &mut worlds);
         let (lo, hi) = worlds.iter().fold(
             (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
             |(lo, hi), w| {

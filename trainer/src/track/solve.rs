@@ -379,12 +379,7 @@ impl<'a> Tracker<'a> {
             silhouette: Some(&term),
             ..plain
         };
-        let (_, its) = levenberg_marquardt(
-            problem.residual_count(),
-            &mut |p: &[f64], out: &mut [f64]| problem.residuals(p, &mut ws, out),
-            &mut params,
-            self.options.iterations,
-        );
+        let (_, its) = levenberg_marquardt(&problem, &mut params, self.options.iterations, &mut ws);
         let mut refined = self.finish(
             obs,
             &robust,
@@ -448,12 +443,8 @@ impl<'a> Tracker<'a> {
                 previous,
                 silhouette: None,
             };
-            let (c, its) = levenberg_marquardt(
-                problem.residual_count(),
-                &mut |p: &[f64], out: &mut [f64]| problem.residuals(p, &mut ctx, out),
-                &mut params,
-                self.options.iterations,
-            );
+            let (c, its) =
+                levenberg_marquardt(&problem, &mut params, self.options.iterations, &mut ctx);
             cost = c;
             iterations += its;
             // Reweight from the current errors.
@@ -537,6 +528,19 @@ impl<'a> Tracker<'a> {
         let problem = Problem::keypoints(self, obs, robust, root0, None);
         let mut ws = Workspace::new(self, obs.len());
         problem.residuals(params, &mut ws, out);
+    }
+
+    /// One frame's reprojection error (pixels) of every observation at `params`, the alignment
+    /// layer weighted by confidence alone; what the calibration's robust weights come from.
+    pub(super) fn frame_errors(
+        &self,
+        obs: &[Observation],
+        root0: DQuat,
+        params: &[f64],
+    ) -> Vec<f64> {
+        let unit = vec![1.0; obs.len()];
+        let problem = Problem::keypoints(self, obs, &unit, root0, None);
+        problem.errors(params, &mut Workspace::new(self, obs.len()))
     }
 
     /// Largest excess of any Euler angle over its limits (radians).
@@ -785,21 +789,21 @@ impl<'t, 'a> Problem<'t, 'a> {
     }
 }
 
-/// Minimises `½‖r(p)‖²` from `params` in place, `residuals` writing the `m` entries of `r(p)`,
-/// with a central-difference Jacobian; returns the final cost and the iterations run.
-pub(super) fn levenberg_marquardt(
-    m: usize,
-    residuals: &mut dyn FnMut(&[f64], &mut [f64]),
+/// Minimises `½‖r(p)‖²` from `params` in place; returns the final cost and the iterations run.
+fn levenberg_marquardt(
+    problem: &Problem<'_, '_>,
     params: &mut [f64],
     max_iterations: usize,
+    ws: &mut Workspace,
 ) -> (f64, usize) {
     let n = params.len();
+    let m = problem.residual_count();
     let mut r = vec![0.0; m];
     let mut r_try = vec![0.0; m];
     let mut plus = vec![0.0; m];
     let mut minus = vec![0.0; m];
     let mut jac = vec![0.0; m * n];
-    residuals(params, &mut r);
+    problem.residuals(params, ws, &mut r);
     let mut cost = 0.5 * r.iter().map(|x| x * x).sum::<f64>();
     let mut mu = 1e-3;
     let h = 1e-6;
@@ -808,9 +812,9 @@ pub(super) fn levenberg_marquardt(
         for c in 0..n {
             let x = params[c];
             params[c] = x + h;
-            residuals(params, &mut plus);
+            problem.residuals(params, ws, &mut plus);
             params[c] = x - h;
-            residuals(params, &mut minus);
+            problem.residuals(params, ws, &mut minus);
             params[c] = x;
             for row in 0..m {
                 jac[row * n + c] = (plus[row] - minus[row]) / (2.0 * h);
@@ -834,7 +838,7 @@ pub(super) fn levenberg_marquardt(
             for i in 0..n {
                 trial[i] = params[i] - step[i];
             }
-            residuals(&trial, &mut r_try);
+            problem.residuals(&trial, ws, &mut r_try);
             let c = 0.5 * r_try.iter().map(|x| x * x).sum::<f64>();
             if c < cost {
                 let step_norm = step.iter().map(|s| s * s).sum::<f64>().sqrt();

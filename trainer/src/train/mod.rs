@@ -757,22 +757,25 @@ impl Trainer {
             .iter()
             .map(|m| m.inverse())
             .collect();
-        let mut poses = Vec::with_capacity(self.data.frames.len());
-        for f in 0..self.data.frames.len() {
-            let rows = self.frame_skinning(&[f])?.flatten_all()?.to_vec1::<f32>()?;
-            let world: Vec<Mat4> = rows
-                .chunks_exact(12)
-                .zip(&bind)
-                .map(|(r, b)| {
-                    let mut m = [0.0; 16];
-                    m[..12].copy_from_slice(r);
-                    m[15] = 1.0;
-                    // `r` holds the top three rows, row-major.
-                    Mat4::from_cols_array(&m).transpose() * *b
-                })
-                .collect();
-            poses.push(pose_refinement::pose_from_world(skeleton, &world));
-        }
+        let all: Vec<usize> = (0..self.data.frames.len()).collect();
+        let rows = self.frame_skinning(&all)?.flatten_all()?.to_vec1::<f32>()?;
+        let poses = rows
+            .chunks_exact(12 * bind.len().max(1))
+            .map(|frame| {
+                let world: Vec<Mat4> = frame
+                    .chunks_exact(12)
+                    .zip(&bind)
+                    .map(|(r, b)| {
+                        let mut m = [0.0; 16];
+                        m[..12].copy_from_slice(r);
+                        m[15] = 1.0;
+                        // `r` holds the top three rows, row-major.
+                        Mat4::from_cols_array(&m).transpose() * *b
+                    })
+                    .collect();
+                pose_refinement::pose_from_world(skeleton, &world)
+            })
+            .collect();
         Ok(Some(poses))
     }
 
