@@ -5,7 +5,8 @@
 //! `--fast [N]` adds, after every `skf:FILE` row, the runtime's fast path at N nodes (and, per
 //! `--top-k K`, its top-k output), scored the same way, and prints their added error against
 //! the exact path (docs/experiments/fast-path.md). `--worst-vertices` adds, per row, the
-//! worst vertex of every test frame and the joints that move it (method and truth).
+//! worst vertex of every test frame and the joints that move it (method and truth), measured
+//! vertex to vertex and off the true surface.
 
 use std::path::PathBuf;
 
@@ -13,7 +14,7 @@ use anyhow::Context;
 use clap::{Args as ClapArgs, ValueEnum};
 use skinfield_formats::capture::load_capture;
 use skinfield_runtime::fast::{FastOptions, Interpolation, NodeMetric};
-use skinfield_trainer::eval::diagnostics::{worst_vertices, worst_vertices_markdown};
+use skinfield_trainer::eval::diagnostics::{WorstMeasure, worst_vertices, worst_vertices_markdown};
 use skinfield_trainer::eval::fast::{FastEval, TopKFormat, VsExact, evaluate_fast};
 use skinfield_trainer::eval::{
     DEFAULT_SAMPLES, EvalOptions, EvalRow, Skinning, evaluate_template, load_template,
@@ -95,7 +96,8 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = TopKWeightsArg::Unorm8)]
     pub top_k_weights: TopKWeightsArg,
     /// After the table, each row's worst vertex on every test frame and the joints moving it
-    /// (the method's and the ground truth's weights, at most 4 each). Capture template only.
+    /// (the method's and the ground truth's weights, at most 4 each), vertex to vertex and off
+    /// the true surface. Capture template only.
     #[arg(long, conflicts_with_all = ["json", "template"])]
     pub worst_vertices: bool,
 }
@@ -184,13 +186,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
         if args.worst_vertices {
-            for skinning in &args.weights {
-                let worst = worst_vertices(&capture, skinning)
-                    .with_context(|| format!("worst vertices of `{}`", skinning.method_name()))?;
-                println!(
-                    "\n{}",
-                    worst_vertices_markdown(&capture, skinning.method_name(), &worst, 4)
-                );
+            for measure in [WorstMeasure::VertexToVertex, WorstMeasure::OffSurface] {
+                for skinning in &args.weights {
+                    let worst = worst_vertices(&capture, skinning, measure).with_context(|| {
+                        format!("worst vertices of `{}`", skinning.method_name())
+                    })?;
+                    println!(
+                        "\n{}",
+                        worst_vertices_markdown(
+                            &capture,
+                            skinning.method_name(),
+                            measure,
+                            &worst,
+                            4
+                        )
+                    );
+                }
             }
         }
     }

@@ -100,8 +100,8 @@ pub struct WorstVertex {
     pub frame: usize,
     /// The template vertex.
     pub vertex: usize,
-    /// Its distance to the same vertex of the ground truth (model units × 100: cm for files
-    /// in metres).
+    /// Its distance to the ground truth by the [`WorstMeasure`] asked for (model units × 100:
+    /// cm for files in metres).
     pub distance_cm: f64,
     /// The method's influences on that vertex and frame (joint, weight), largest first; empty
     /// where the method has no per-vertex weights (`bound-pose`).
@@ -111,24 +111,53 @@ pub struct WorstVertex {
     pub true_influences: Vec<(u32, f32)>,
 }
 
-/// The worst vertex of every test frame under `skinning` (vertex-to-vertex distance, as in the
-/// zoo's worst-vertex check).
+/// How [`worst_vertices`] measures a vertex's distance to the truth (the two figures of the
+/// zoo's worst-vertex checks).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WorstMeasure {
+    /// To the same vertex of the ground truth: a vertex sliding along the surface counts.
+    VertexToVertex,
+    /// To the ground-truth surface: only a vertex off the surface (a spike) counts.
+    OffSurface,
+}
+
+impl WorstMeasure {
+    /// The figure's name in tables.
+    #[must_use]
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::VertexToVertex => "vertex to vertex",
+            Self::OffSurface => "off the true surface",
+        }
+    }
+}
+
+/// The worst vertex of every test frame under `skinning`, by `measure`.
 pub fn worst_vertices(
     capture: &Capture,
     skinning: &Skinning,
+    measure: WorstMeasure,
 ) -> Result<Vec<WorstVertex>, EvalError> {
     let prepared = PreparedSkinning::new(capture, skinning)?;
     let truth_weights = capture.evaluation_true_weights()?;
     let mut out = Vec::with_capacity(capture.test_frames.len());
     for &f in &capture.test_frames {
         let posed = prepared.pose_frame(capture, f)?;
-        let truth = capture.evaluation_gt_mesh(f)?;
-        let Some((vertex, distance)) = posed
+        let distances: Vec<f32> = match measure {
+            WorstMeasure::VertexToVertex => {
+                let truth = capture.evaluation_gt_mesh(f)?;
+                posed
+                    .iter()
+                    .zip(&truth)
+                    .map(|(a, b)| (*a - *b).length())
+                    .collect()
+            }
+            WorstMeasure::OffSurface => super::per_vertex_m2s(capture, f, &posed)?,
+        };
+        let Some((vertex, &distance)) = distances
             .iter()
-            .zip(&truth)
-            .map(|(a, b)| (*a - *b).length())
             .enumerate()
-            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .max_by(|a, b| a.1.total_cmp(b.1))
         else {
             continue;
         };
@@ -155,6 +184,7 @@ pub fn worst_vertices(
 pub fn worst_vertices_markdown(
     capture: &Capture,
     method: &str,
+    measure: WorstMeasure,
     worst: &[WorstVertex],
     max_joints: usize,
 ) -> String {
@@ -176,7 +206,11 @@ pub fn worst_vertices_markdown(
             .join(", ")
     };
     let mut s = String::new();
-    let _ = writeln!(s, "### Worst vertex per test frame: {method}\n");
+    let _ = writeln!(
+        s,
+        "### Worst vertex per test frame, {}: {method}\n",
+        measure.label()
+    );
     let _ = writeln!(
         s,
         "| frame | vertex | distance (cm) | joints (method) | joints (truth) |"
@@ -346,7 +380,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
         let capture = load_capture(dir.path()).unwrap();
-        let worst = worst_vertices(&capture, &Skinning::Initial).unwrap();
+        let worst =
+            worst_vertices(&capture, &Skinning::Initial, WorstMeasure::VertexToVertex).unwrap();
         assert_eq!(worst.len(), capture.test_frames.len());
         let prepared = PreparedSkinning::new(&capture, &Skinning::Initial).unwrap();
         let heat = crate::heat::bone_heat(
@@ -374,13 +409,34 @@ mod tests {
             assert!(!w.true_influences.is_empty());
         }
         // Under the oracle the method's joints are the truth's.
-        for w in worst_vertices(&capture, &Skinning::Oracle).unwrap() {
+        for w in worst_vertices(&capture, &Skinning::Oracle, WorstMeasure::VertexToVertex).unwrap()
+        {
             assert_eq!(w.influences, w.true_influences);
         }
-        let md = worst_vertices_markdown(&capture, "initial", &worst, 2);
+        let md =
+            worst_vertices_markdown(&capture, "initial", WorstMeasure::VertexToVertex, &worst, 2);
         assert_eq!(
             md.lines().filter(|l| l.starts_with("| ")).count(),
             worst.len() + 2
+        );
+        // Off the surface: the frame's largest distance to the true surface, which is the
+        // evaluation's per-frame figure, and never more than the vertex-to-vertex one.
+        let off = worst_vertices(&capture, &Skinning::Initial, WorstMeasure::OffSurface).unwrap();
+        let frames =
+            crate::eval::evaluate_frames(&capture, &crate::eval::EvalOptions::default(), |f| {
+                Ok(prepared.pose_frame(&capture, f)?)
+            })
+            .unwrap();
+        for ((o, w), f) in off.iter().zip(&worst).zip(&frames) {
+            assert!(
+                (o.distance_cm - f.max_off_surface_cm).abs() < 1e-6,
+                "{o:?} vs {f:?}"
+            );
+            assert!(o.distance_cm <= w.distance_cm + 1e-6, "{o:?} vs {w:?}");
+        }
+        assert!(
+            worst_vertices_markdown(&capture, "initial", WorstMeasure::OffSurface, &off, 2)
+                .contains("off the true surface: initial")
         );
     }
 

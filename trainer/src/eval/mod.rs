@@ -29,13 +29,21 @@
 //!
 //! # Worst vertex
 //!
-//! Surface distances let a vertex slide along the surface unseen and average a spike away.
-//! Each frame therefore also records the largest **vertex-to-vertex** distance between the
-//! posed template and the ground truth (`max_vertex_cm`, the same vertices, so sliding counts);
-//! a row keeps it per frame (`per_frame`) and its maximum over the frames. [`worst_vertex_check`]
-//! compares two rows frame by frame: "no test frame where any vertex of ours is further from
-//! the truth than the worst vertex of bone heat on that frame". Templates of another resolution
-//! have no vertex correspondence and leave these fields empty.
+//! Mean surface distances average a spike away. Each frame therefore also records two worst
+//! vertices, and a row keeps both per frame (`per_frame`) and their maxima over the frames:
+//!
+//! - `max_off_surface_cm`: the largest distance from a vertex of the posed mesh to the
+//!   ground-truth **surface**. A spike (a vertex pulled across the body by a far joint) is off
+//!   the surface and shows here; a vertex that slides along the true surface does not. Defined
+//!   for a mesh of any resolution.
+//! - `max_vertex_cm`: the largest **vertex-to-vertex** distance to the ground truth (the same
+//!   vertices, so sliding counts too: a ball centred on a joint and carried by the other bone
+//!   has the right surface and wrong vertices). Templates of another resolution have no vertex
+//!   correspondence and leave it empty.
+//!
+//! [`off_surface_check`] and [`worst_vertex_check`] compare two rows frame by frame on each
+//! figure: "no test frame where any vertex of ours is further from the truth than the worst
+//! vertex of bone heat on that frame".
 //!
 //! # Templates at other resolutions
 //!
@@ -83,8 +91,8 @@ pub use posing::{Blend, PosingError, pose_static};
 pub use static_weights::{StaticWeightsError, read_static_weights, write_static_weights};
 pub use surface::{DEFAULT_SAMPLES, Surface, SurfaceError, SurfaceMetrics, surface_metrics};
 pub use table::{
-    EvalRow, FrameRow, WorstVertexCheck, rows_from_json, rows_to_json, rows_to_table,
-    worst_vertex_check,
+    EvalRow, FrameRow, WorstVertexCheck, off_surface_check, rows_from_json, rows_to_json,
+    rows_to_table, worst_vertex_check,
 };
 
 /// The skinning whose posed meshes are scored.
@@ -497,6 +505,8 @@ pub struct FrameMetrics {
     /// Largest vertex-to-vertex distance to the ground truth (cm), when the posed mesh has the
     /// capture template's vertices (`None` for a template of another resolution).
     pub max_vertex_cm: Option<f64>,
+    /// Largest distance from a vertex of the posed mesh to the ground-truth surface (cm).
+    pub max_off_surface_cm: f64,
 }
 
 /// The sampling seed of one frame: distinct streams per frame, identical across methods.
@@ -551,6 +561,9 @@ pub fn evaluate_mesh_frames(
             frame_seed(options.seed, frame),
         )
         .map_err(|source| EvalError::Surface { frame, source })?;
+        let off_surface = distances_to_truth(&truth, &capture.template.triangles, &posed)
+            .into_iter()
+            .fold(0.0f32, f32::max);
         out.push(FrameMetrics {
             frame,
             m2s_cm: m.m2s * 100.0,
@@ -558,6 +571,7 @@ pub fn evaluate_mesh_frames(
             max_vertex_cm: max_vertex_distance(&posed, &truth)
                 .filter(|_| corresponds)
                 .map(|d| d * 100.0),
+            max_off_surface_cm: f64::from(off_surface) * 100.0,
         });
     }
     Ok(out)
@@ -605,6 +619,12 @@ pub fn average(method: &str, frames: &[FrameMetrics], size: f64) -> EvalRow {
         .map(|f| f.max_vertex_cm)
         .collect::<Option<Vec<f64>>>()
         .map(|v| v.into_iter().fold(0.0f64, f64::max));
+    let off_surface = (!frames.is_empty()).then(|| {
+        frames
+            .iter()
+            .map(|f| f.max_off_surface_cm)
+            .fold(0.0f64, f64::max)
+    });
     let percent = |cm: f64| percent_of_size(cm, size);
     EvalRow {
         method: method.to_string(),
@@ -616,6 +636,8 @@ pub fn average(method: &str, frames: &[FrameMetrics], size: f64) -> EvalRow {
         chamfer_pct: percent(m2s + s2m),
         max_vertex_cm: max_vertex,
         max_vertex_pct: max_vertex.map(percent),
+        max_off_surface_cm: off_surface,
+        max_off_surface_pct: off_surface.map(percent),
         per_frame: frames
             .iter()
             .map(|f| FrameRow {
@@ -623,6 +645,7 @@ pub fn average(method: &str, frames: &[FrameMetrics], size: f64) -> EvalRow {
                 m2s_cm: f.m2s_cm,
                 s2m_cm: f.s2m_cm,
                 max_vertex_cm: f.max_vertex_cm,
+                max_off_surface_cm: Some(f.max_off_surface_cm),
             })
             .collect(),
     }
@@ -691,8 +714,19 @@ pub fn per_vertex_m2s(
     posed: &[Vec3],
 ) -> Result<Vec<f32>, EvalError> {
     let truth = capture.evaluation_gt_mesh(frame)?;
-    let bvh = crate::triangle_bvh::TriangleBvh::new(&truth, &capture.template.triangles);
-    Ok(surface::distances_to(posed, &bvh))
+    Ok(distances_to_truth(
+        &truth,
+        &capture.template.triangles,
+        posed,
+    ))
+}
+
+/// Distance from each of `points` to the surface of `truth` (positions) and `triangles`.
+fn distances_to_truth(truth: &[Vec3], triangles: &[[u32; 3]], points: &[Vec3]) -> Vec<f32> {
+    surface::distances_to(
+        points,
+        &crate::triangle_bvh::TriangleBvh::new(truth, triangles),
+    )
 }
 pub mod render;
 #[cfg(test)]

@@ -182,6 +182,8 @@ mod tests {
             chamfer_pct: 0.0,
             max_vertex_cm: None,
             max_vertex_pct: None,
+            max_off_surface_cm: None,
+            max_off_surface_pct: None,
             per_frame: Vec::new(),
         }
     }

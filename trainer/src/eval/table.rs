@@ -1,8 +1,9 @@
 //! Result rows and their two renderings: a fixed-width text table and JSON
 //! (`{"rows":[{"method":…,"chamfer_cm":…,"m2s_cm":…,"s2m_cm":…,"frames":…,"size":…,
-//! "chamfer_pct":…,"max_vertex_cm":…,"max_vertex_pct":…,"per_frame":[{"frame":…,"m2s_cm":…,
-//! "s2m_cm":…,"max_vertex_cm":…}]}]}`; the fields after `frames` were added later and default
-//! when absent, so older files still parse).
+//! "chamfer_pct":…,"max_vertex_cm":…,"max_vertex_pct":…,"max_off_surface_cm":…,
+//! "max_off_surface_pct":…,"per_frame":[{"frame":…,"m2s_cm":…,"s2m_cm":…,"max_vertex_cm":…,
+//! "max_off_surface_cm":…}]}]}`; the fields after `frames` were added later and default when
+//! absent, so older files still parse).
 
 use std::fmt::Write as _;
 
@@ -33,6 +34,13 @@ pub struct EvalRow {
     /// `max_vertex_cm` as a percentage of `size`.
     #[serde(default)]
     pub max_vertex_pct: Option<f64>,
+    /// Largest distance from a vertex of the posed mesh to the ground-truth surface over every
+    /// test frame (cm); `None` in files written before it existed.
+    #[serde(default)]
+    pub max_off_surface_cm: Option<f64>,
+    /// `max_off_surface_cm` as a percentage of `size`.
+    #[serde(default)]
+    pub max_off_surface_pct: Option<f64>,
     /// Each test frame's figures, in the capture's test-frame order.
     #[serde(default)]
     pub per_frame: Vec<FrameRow>,
@@ -49,6 +57,9 @@ pub struct FrameRow {
     pub s2m_cm: f64,
     /// Largest vertex-to-vertex distance to the ground truth (cm), if defined.
     pub max_vertex_cm: Option<f64>,
+    /// Largest distance from a vertex to the ground-truth surface (cm), if recorded.
+    #[serde(default)]
+    pub max_off_surface_cm: Option<f64>,
 }
 
 /// The outcome of [`worst_vertex_check`].
@@ -69,10 +80,26 @@ impl WorstVertexCheck {
     }
 }
 
-/// Compares, frame by frame, the worst vertex of `candidate` with that of `reference` (e.g.
-/// ours against bone heat). `None` when the rows lack per-vertex figures or their frames differ.
+/// Compares, frame by frame, the worst vertex-to-vertex distance of `candidate` with that of
+/// `reference` (e.g. ours against bone heat). `None` when the rows lack per-vertex figures or
+/// their frames differ.
 #[must_use]
 pub fn worst_vertex_check(candidate: &EvalRow, reference: &EvalRow) -> Option<WorstVertexCheck> {
+    check_frames(candidate, reference, |f| f.max_vertex_cm)
+}
+
+/// Compares, frame by frame, the vertex furthest from the true surface of `candidate` with
+/// that of `reference`. `None` when the rows lack the figure or their frames differ.
+#[must_use]
+pub fn off_surface_check(candidate: &EvalRow, reference: &EvalRow) -> Option<WorstVertexCheck> {
+    check_frames(candidate, reference, |f| f.max_off_surface_cm)
+}
+
+fn check_frames(
+    candidate: &EvalRow,
+    reference: &EvalRow,
+    figure: impl Fn(&FrameRow) -> Option<f64>,
+) -> Option<WorstVertexCheck> {
     if candidate.per_frame.len() != reference.per_frame.len() || candidate.per_frame.is_empty() {
         return None;
     }
@@ -81,7 +108,7 @@ pub fn worst_vertex_check(candidate: &EvalRow, reference: &EvalRow) -> Option<Wo
         if c.frame != r.frame {
             return None;
         }
-        let (cv, rv) = (c.max_vertex_cm?, r.max_vertex_cm?);
+        let (cv, rv) = (figure(c)?, figure(r)?);
         if cv > rv {
             failures.push((c.frame, cv, rv));
         }
@@ -116,8 +143,8 @@ pub fn rows_from_json(text: &str) -> Result<Vec<EvalRow>, serde_json::Error> {
 }
 
 /// The rows as a text table, in the paper's column order (Chamfer, M2S, S2M), three decimals,
-/// then the frame count, the Chamfer relative to the character's size and the worst vertex
-/// (`-` where undefined).
+/// then the frame count, the Chamfer relative to the character's size and the two worst
+/// vertices, off the true surface and vertex to vertex (`-` where undefined).
 #[must_use]
 pub fn rows_to_table(rows: &[EvalRow]) -> String {
     let width = rows
@@ -129,28 +156,34 @@ pub fn rows_to_table(rows: &[EvalRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<width$}  {:>12}  {:>8}  {:>8}  {:>6}  {:>11}  {:>15}",
+        "{:<width$}  {:>12}  {:>8}  {:>8}  {:>6}  {:>11}  {:>16}  {:>15}",
         "method",
         "Chamfer (cm)",
         "M2S (cm)",
         "S2M (cm)",
         "frames",
         "Chamfer (%)",
+        "off surface (cm)",
         "max vertex (cm)"
     );
     let _ = writeln!(
         s,
         "{}",
-        "-".repeat(width + 2 + 12 + 2 + 8 + 2 + 8 + 2 + 6 + 2 + 11 + 2 + 15)
+        "-".repeat(width + 2 + 12 + 2 + 8 + 2 + 8 + 2 + 6 + 2 + 11 + 2 + 16 + 2 + 15)
     );
+    let cell = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |v| format!("{v:.3}"));
     for r in rows {
-        let worst = r
-            .max_vertex_cm
-            .map_or_else(|| "-".to_string(), |v| format!("{v:.3}"));
         let _ = writeln!(
             s,
-            "{:<width$}  {:>12.3}  {:>8.3}  {:>8.3}  {:>6}  {:>11.4}  {:>15}",
-            r.method, r.chamfer_cm, r.m2s_cm, r.s2m_cm, r.frames, r.chamfer_pct, worst
+            "{:<width$}  {:>12.3}  {:>8.3}  {:>8.3}  {:>6}  {:>11.4}  {:>16}  {:>15}",
+            r.method,
+            r.chamfer_cm,
+            r.m2s_cm,
+            r.s2m_cm,
+            r.frames,
+            r.chamfer_pct,
+            cell(r.max_off_surface_cm),
+            cell(r.max_vertex_cm)
         );
     }
     s
@@ -166,6 +199,7 @@ mod tests {
             m2s_cm: 1.0,
             s2m_cm: 1.0,
             max_vertex_cm,
+            max_off_surface_cm: max_vertex_cm.map(|v| v / 2.0),
         }
     }
 
@@ -181,6 +215,8 @@ mod tests {
                 chamfer_pct: 1.3,
                 max_vertex_cm: Some(7.5),
                 max_vertex_pct: Some(3.0),
+                max_off_surface_cm: Some(3.75),
+                max_off_surface_pct: Some(1.5),
                 per_frame: vec![frame(4, Some(7.5)), frame(9, Some(2.0))],
             },
             EvalRow {
@@ -193,6 +229,8 @@ mod tests {
                 chamfer_pct: 0.2,
                 max_vertex_cm: None,
                 max_vertex_pct: None,
+                max_off_surface_cm: None,
+                max_off_surface_pct: None,
                 per_frame: Vec::new(),
             },
         ]
@@ -213,6 +251,8 @@ mod tests {
         assert_eq!(first["max_vertex_cm"], 7.5);
         assert_eq!(first["per_frame"][1]["frame"], 9);
         assert_eq!(first["per_frame"][1]["max_vertex_cm"], 2.0);
+        assert_eq!(first["max_off_surface_cm"], 3.75);
+        assert_eq!(first["per_frame"][1]["max_off_surface_cm"], 1.0);
         assert!(v["rows"][1]["max_vertex_cm"].is_null());
         assert_eq!(v["rows"].as_array().unwrap().len(), 2);
         assert_eq!(rows_from_json(&text).unwrap(), rows());
@@ -236,6 +276,7 @@ mod tests {
                 && lines[2].contains("3.250")
                 && lines[2].contains(" 12 ")
                 && lines[2].contains("1.3000")
+                && lines[2].contains(" 3.750 ")
                 && lines[2].ends_with("7.500")
         );
         assert!(lines[3].starts_with("oracle-dqs") && lines[3].contains("0.500"));
@@ -262,5 +303,24 @@ mod tests {
         candidate.per_frame[1] = frame(9, None);
         assert!(worst_vertex_check(&candidate, &reference).is_none());
         assert!(worst_vertex_check(&rows()[1], &rows()[1]).is_none());
+    }
+
+    #[test]
+    fn the_off_surface_check_compares_its_own_figure() {
+        let reference = rows().remove(0);
+        let mut candidate = reference.clone();
+        assert!(off_surface_check(&candidate, &reference).unwrap().passed());
+        // Worse vertex to vertex only (a part sliding along the surface): the off-surface
+        // check still passes.
+        candidate.per_frame[1].max_vertex_cm = Some(2.5);
+        assert!(off_surface_check(&candidate, &reference).unwrap().passed());
+        assert!(!worst_vertex_check(&candidate, &reference).unwrap().passed());
+        // Off the surface (a spike): it fails, naming the frame and both figures.
+        candidate.per_frame[0].max_off_surface_cm = Some(4.0);
+        let check = off_surface_check(&candidate, &reference).unwrap();
+        assert_eq!(check.failures, vec![(4, 4.0, 3.75)]);
+        // A row from a file written before the figure existed cannot be compared.
+        candidate.per_frame[0].max_off_surface_cm = None;
+        assert!(off_surface_check(&candidate, &reference).is_none());
     }
 }

@@ -277,6 +277,38 @@ fn worst_vertex_and_relative_figures_follow_a_known_shift() {
     for f in &frames {
         let worst = f.max_vertex_cm.unwrap();
         assert!((worst - 1.0).abs() < 1e-4, "{f:?}");
+        // Every shifted vertex is at most 1 cm from its true position, which is on the
+        // surface; the nearest surface point may be closer.
+        assert!(
+            f.max_off_surface_cm > 0.0 && f.max_off_surface_cm <= 1.0 + 1e-4,
+            "{f:?}"
+        );
+    }
+    // The truth itself: nothing off the surface.
+    let exact =
+        evaluate_frames(&capture, &OPTIONS, |f| Ok(capture.evaluation_gt_mesh(f)?)).unwrap();
+    assert!(
+        exact.iter().all(|f| f.max_off_surface_cm < 1e-4),
+        "{exact:?}"
+    );
+    // One vertex spiked 5 m along x: it is at least as far from the surface as from the
+    // truth's bounding box, and both worst-vertex figures see it.
+    let spike = Vec3::new(5.0, 0.0, 0.0);
+    let spiked = evaluate_frames(&capture, &OPTIONS, |f| {
+        let mut p = capture.evaluation_gt_mesh(f)?;
+        p[0] += spike;
+        Ok(p)
+    })
+    .unwrap();
+    for (f, &frame) in spiked.iter().zip(&capture.test_frames) {
+        let truth = capture.evaluation_gt_mesh(frame).unwrap();
+        let lo = truth.iter().fold(Vec3::splat(f32::MAX), |a, b| a.min(*b));
+        let hi = truth.iter().fold(Vec3::splat(f32::MIN), |a, b| a.max(*b));
+        let p = truth[0] + spike;
+        let to_box = f64::from((p - p.clamp(lo, hi)).length()) * 100.0;
+        assert!(f.max_off_surface_cm >= to_box - 1e-3, "{f:?} {to_box}");
+        assert!(f.max_off_surface_cm <= 500.0 + 1e-3, "{f:?}");
+        assert!((f.max_vertex_cm.unwrap() - 500.0).abs() < 1e-3, "{f:?}");
     }
     // The size is the rest template's bounding-box diagonal, from its extreme coordinates.
     let p = &capture.template.positions;
@@ -309,6 +341,9 @@ fn worst_vertex_and_relative_figures_follow_a_known_shift() {
     let check = worst_vertex_check(&dqs_row, &uniform_row).unwrap();
     assert!(check.passed(), "{check:?}");
     assert!(!worst_vertex_check(&uniform_row, &dqs_row).unwrap().passed());
+    let check = off_surface_check(&dqs_row, &uniform_row).unwrap();
+    assert!(check.passed(), "{check:?}");
+    assert!(!off_surface_check(&uniform_row, &dqs_row).unwrap().passed());
 
     // A posed mesh with other vertices has no vertex correspondence: no worst vertex.
     let mut triangles = capture.template.triangles.clone();
@@ -321,6 +356,17 @@ fn worst_vertex_and_relative_figures_follow_a_known_shift() {
     .unwrap();
     assert!(frames.iter().all(|f| f.max_vertex_cm.is_none()));
     assert_eq!(average("other", &frames, size).max_vertex_cm, None);
+    // The off-surface figure needs no correspondence: only the extra vertex at the origin is
+    // off the surface, by no more than its distance to the nearest true vertex.
+    for (f, &frame) in frames.iter().zip(&capture.test_frames) {
+        let truth = capture.evaluation_gt_mesh(frame).unwrap();
+        let nearest = truth.iter().map(|p| p.length()).fold(f32::MAX, f32::min);
+        assert!(
+            f.max_off_surface_cm <= f64::from(nearest) * 100.0 + 1e-3,
+            "{f:?}"
+        );
+    }
+    assert!(average("other", &frames, size).max_off_surface_cm.is_some());
 }
 
 #[test]
