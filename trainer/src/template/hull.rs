@@ -71,8 +71,19 @@ impl HullView {
     /// Signed distance (pixels, negative inside) from image point `p` to the mask's outline.
     #[must_use]
     pub fn signed_pixels(&self, p: Vec2) -> f32 {
-        let (d, _) = self.outline.distance(p);
-        if self.coverage_at(p) >= 0.5 { -d } else { d }
+        self.signed_pixels_with_gradient(p).0
+    }
+
+    /// [`Self::signed_pixels`] and its gradient with respect to `p` (a unit vector away from
+    /// the nearest outline point, outwards; zero on the outline).
+    #[must_use]
+    pub fn signed_pixels_with_gradient(&self, p: Vec2) -> (f32, Vec2) {
+        let (d, g) = self.outline.distance(p);
+        if self.coverage_at(p) >= 0.5 {
+            (-d, -g)
+        } else {
+            (d, g)
+        }
     }
 
     /// Signed distance (metres, negative inside) from `x` to this view's silhouette cone,

@@ -120,16 +120,34 @@ impl TrackingBody {
     /// Poses the body with the joints' world matrices `worlds` (root translation zero, as
     /// [`super::Kinematics::world_matrices`] gives them) and the world shift `shift`.
     pub fn pose(&self, worlds: &[DMat4], shift: DVec3, out: &mut Vec<DVec3>) {
+        let mut skinning = Vec::with_capacity(worlds.len());
+        self.skinning_matrices(worlds, &mut skinning);
         out.clear();
-        out.extend(self.rest.iter().zip(&self.influences).map(|(&x, inf)| {
-            let mut p = DVec3::ZERO;
-            for &(j, w) in inf {
-                if w > 0.0 {
-                    p += w * (worlds[j] * self.inverse_bind[j]).transform_point3(x);
-                }
+        out.extend((0..self.rest.len()).map(|v| self.skin_vertex(v, &skinning) + shift));
+    }
+
+    /// Each joint's inverse bind matrix.
+    pub(super) fn inverse_bind(&self) -> &[DMat4] {
+        &self.inverse_bind
+    }
+
+    /// Each joint's skinning matrix (world times inverse bind) for `worlds`, into `out`.
+    pub(super) fn skinning_matrices(&self, worlds: &[DMat4], out: &mut Vec<DMat4>) {
+        out.clear();
+        out.extend(worlds.iter().zip(&self.inverse_bind).map(|(w, b)| *w * *b));
+    }
+
+    /// Vertex `v` skinned by `skinning` (no shift). The map is linear in the matrices, so the
+    /// derivatives of the skinning matrices give the vertex's derivative.
+    pub(super) fn skin_vertex(&self, v: usize, skinning: &[DMat4]) -> DVec3 {
+        let x = self.rest[v];
+        let mut p = DVec3::ZERO;
+        for &(j, w) in &self.influences[v] {
+            if w > 0.0 {
+                p += w * skinning[j].transform_point3(x);
             }
-            p + shift
-        }));
+        }
+        p
     }
 
     /// The outline vertices of the posed body in every view (at most
@@ -163,6 +181,38 @@ pub fn outline_residual(view: &HullView, x: DVec3) -> f64 {
     };
     let d = f64::from(view.signed_pixels(Vec2::new(p.x as f32, p.y as f32)));
     SILHOUETTE_SCALE_PX * (d / SILHOUETTE_SCALE_PX).tanh()
+}
+
+/// The gradient of [`outline_residual`] with respect to `x` (zero behind the camera, where
+/// the residual is constant).
+#[must_use]
+pub fn outline_residual_gradient(view: &HullView, x: DVec3) -> DVec3 {
+    let Some(p) = view.camera.project_f64(x) else {
+        return DVec3::ZERO;
+    };
+    let (d, g) = view.signed_pixels_with_gradient(Vec2::new(p.x as f32, p.y as f32));
+    let th = (f64::from(d) / SILHOUETTE_SCALE_PX).tanh();
+    let g = g.as_dvec2() * (1.0 - th * th);
+    let j = projection_jacobian(&view.camera, x);
+    DVec3::new(g.dot(j[0]), g.dot(j[1]), g.dot(j[2]))
+}
+
+/// The derivative of `camera.project_f64` at `x` with respect to each world coordinate (one
+/// pixel-space column per axis), by central differences in f64 (the lens distortion has no
+/// closed-form derivative here); zero columns where a side of the difference is behind the
+/// camera.
+#[must_use]
+pub fn projection_jacobian(camera: &skinfield_formats::Camera, x: DVec3) -> [glam::DVec2; 3] {
+    let h = 1e-6 * x.length().max(1.0);
+    let mut out = [glam::DVec2::ZERO; 3];
+    for (k, col) in out.iter_mut().enumerate() {
+        let mut e = DVec3::ZERO;
+        e[k] = h;
+        if let (Some(a), Some(b)) = (camera.project_f64(x + e), camera.project_f64(x - e)) {
+            *col = (a - b) / (2.0 * h);
+        }
+    }
+    out
 }
 
 #[cfg(test)]

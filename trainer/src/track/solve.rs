@@ -15,17 +15,20 @@
 //! during training): in the first round `1 / (1 + depth)` of the landmark's joint below the
 //! root, so the torso settles before the limbs; 1 afterwards.
 //!
-//! The Jacobian is taken by central differences of the whole residual (alignment layer
-//! included) in f64; the alignment layer's analytic derivative is tested against the same
-//! differences in `alignment.rs`.
+//! The Jacobian follows the chain rule through the alignment layer's analytic derivative, with
+//! differences taken through forward kinematics only (the `jacobian` submodule); central
+//! differences of the whole residual remain as the fallback where the alignment layer has no
+//! solution.
 
 use glam::{DMat4, DQuat, DVec2, DVec3};
 use skinfield_formats::{Camera, JointDofs};
 
-use super::alignment::{Ray, global_alignment};
+use super::alignment::{Alignment, Ray, global_alignment};
 use super::kinematics::{Kinematics, Landmark, rotvec_to_dquat};
 use super::silhouette::{TrackingBody, outline_residual};
 use crate::template::hull::HullView;
+
+mod jacobian;
 
 /// One 2D detection of a landmark in one view.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -567,6 +570,7 @@ struct Workspace {
     obs_points: Vec<DVec3>,
     rays: Vec<Ray>,
     posed: Vec<DVec3>,
+    skinning: Vec<DMat4>,
 }
 
 impl Workspace {
@@ -577,6 +581,7 @@ impl Workspace {
             obs_points: vec![DVec3::ZERO; obs],
             rays: Vec::with_capacity(obs),
             posed: Vec::new(),
+            skinning: Vec::new(),
         }
     }
 }
@@ -638,9 +643,21 @@ impl<'t, 'a> Problem<'t, 'a> {
 
     /// Root rotation and alignment-layer shift for `params` (landmarks left in `ws.points`).
     fn root_and_shift(&self, params: &[f64], ws: &mut Workspace) -> (DQuat, Option<DVec3>) {
+        let (root, alignment) = self.root_and_alignment(params, ws);
+        (root, alignment.map(|a| a.translation))
+    }
+
+    /// The root rotation of `params` (their first three entries, a rotation vector applied
+    /// before `root0`).
+    fn root(&self, params: &[f64]) -> DQuat {
+        (rotvec_to_dquat(DVec3::new(params[0], params[1], params[2])) * self.root0).normalize()
+    }
+
+    /// Root rotation and the alignment layer's solution for `params` (landmarks left in
+    /// `ws.points`, world matrices in `ws.worlds`, rays in `ws.rays`).
+    fn root_and_alignment(&self, params: &[f64], ws: &mut Workspace) -> (DQuat, Option<Alignment>) {
         let t = self.tracker;
-        let root =
-            (rotvec_to_dquat(DVec3::new(params[0], params[1], params[2])) * self.root0).normalize();
+        let root = self.root(params);
         t.kinematics.landmarks(
             root,
             &params[3..],
@@ -657,8 +674,7 @@ impl<'t, 'a> Problem<'t, 'a> {
                 weight: self.keypoint_weight(o, self.robust[i]),
             });
         }
-        let shift = global_alignment(&ws.obs_points, &ws.rays).map(|a| a.translation);
-        (root, shift)
+        (root, global_alignment(&ws.obs_points, &ws.rays))
     }
 
     fn project(&self, o: &Observation, x: DVec3) -> DVec2 {
@@ -708,7 +724,6 @@ impl<'t, 'a> Problem<'t, 'a> {
     /// The residual vector: weighted reprojection errors (Eq. 6), limit excesses (Eq. 7) and
     /// the translating joints' prior, temporal changes, outline distances.
     fn residuals(&self, params: &[f64], ws: &mut Workspace, out: &mut [f64]) {
-        let t = self.tracker;
         let (root, shift) = self.root_and_shift(params, ws);
         let mut k = 0;
         match shift {
@@ -730,6 +745,34 @@ impl<'t, 'a> Problem<'t, 'a> {
                 k = 2 * self.obs.len();
             }
         }
+        let priors = self.prior_count();
+        self.prior_residuals(params, root, &mut out[k..k + priors]);
+        k += priors;
+        if let Some(term) = self.silhouette {
+            let shift = shift.unwrap_or(DVec3::ZERO);
+            term.body.skinning_matrices(&ws.worlds, &mut ws.skinning);
+            for (view, vertices) in term.masks.iter().zip(term.outline) {
+                for &v in vertices {
+                    let x = term.body.skin_vertex(v as usize, &ws.skinning) + shift;
+                    out[k] = term.weight_sqrt * outline_residual(view, x);
+                    k += 1;
+                }
+            }
+        }
+        debug_assert_eq!(k, out.len());
+    }
+
+    /// Rows of the limit, translation-prior and temporal terms ([`Self::prior_residuals`]).
+    fn prior_count(&self) -> usize {
+        let a = self.tracker.kinematics.param_count();
+        a + if self.previous.is_some() { 3 + a } else { 0 }
+    }
+
+    /// The limit excesses (Eq. 7), the translating joints' prior and the temporal changes at
+    /// `params` (whose root rotation is `root`), into `out` ([`Self::prior_count`] rows).
+    fn prior_residuals(&self, params: &[f64], root: DQuat, out: &mut [f64]) {
+        let t = self.tracker;
+        let mut k = 0;
         let angles = &params[3..];
         let lw = t.options.limit_weight.sqrt();
         let mut a = 0;
@@ -775,16 +818,6 @@ impl<'t, 'a> Problem<'t, 'a> {
                 k += 1;
             }
         }
-        if let Some(term) = self.silhouette {
-            term.body
-                .pose(&ws.worlds, shift.unwrap_or(DVec3::ZERO), &mut ws.posed);
-            for (view, vertices) in term.masks.iter().zip(term.outline) {
-                for &v in vertices {
-                    out[k] = term.weight_sqrt * outline_residual(view, ws.posed[v as usize]);
-                    k += 1;
-                }
-            }
-        }
         debug_assert_eq!(k, out.len());
     }
 }
@@ -806,19 +839,10 @@ fn levenberg_marquardt(
     problem.residuals(params, ws, &mut r);
     let mut cost = 0.5 * r.iter().map(|x| x * x).sum::<f64>();
     let mut mu = 1e-3;
-    let h = 1e-6;
     let mut trial = params.to_vec();
     for it in 0..max_iterations {
-        for c in 0..n {
-            let x = params[c];
-            params[c] = x + h;
-            problem.residuals(params, ws, &mut plus);
-            params[c] = x - h;
-            problem.residuals(params, ws, &mut minus);
-            params[c] = x;
-            for row in 0..m {
-                jac[row * n + c] = (plus[row] - minus[row]) / (2.0 * h);
-            }
+        if !problem.jacobian(params, ws, &mut jac) {
+            problem.jacobian_by_differences(params, ws, &mut jac, &mut plus, &mut minus);
         }
         let (jtj, jtr) = normal_equations(&jac, &r, n);
         let gradient = jtr.iter().map(|g| g.abs()).fold(0.0, f64::max);
@@ -913,25 +937,39 @@ pub(super) fn cholesky_substitute(l: &[f64], n: usize, b: &mut [f64]) {
     }
 }
 
-/// `Jᵀ J` (upper and lower), and `Jᵀ r`, of a row-major `m × n` `jac`.
+/// `Jᵀ J` (row-major `n × n`), and `Jᵀ r`, of a row-major `m × n` `jac`: faer's blocked
+/// matrix product on one thread (its summation order, and so the fit, does not depend on the
+/// machine).
 pub(super) fn normal_equations(jac: &[f64], r: &[f64], n: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut jtj = vec![0.0; n * n];
-    let mut jtr = vec![0.0; n];
-    for (row, rv) in jac.chunks_exact(n).zip(r) {
-        for i in 0..n {
-            if row[i] == 0.0 {
-                continue;
-            }
-            jtr[i] += row[i] * rv;
-            for k in i..n {
-                jtj[i * n + k] += row[i] * row[k];
-            }
-        }
-    }
+    use faer::linalg::matmul::matmul;
+    use faer::{Accum, ColRef, Mat, MatRef, Par};
+    let m = r.len();
+    let j = MatRef::from_row_major_slice(jac, m, n);
+    let mut jtj = Mat::<f64>::zeros(n, n);
+    matmul(
+        jtj.as_mut(),
+        Accum::Replace,
+        j.transpose(),
+        j,
+        1.0,
+        Par::Seq,
+    );
+    let mut jtr = Mat::<f64>::zeros(n, 1);
+    let rv = ColRef::from_slice(r).as_mat();
+    matmul(
+        jtr.as_mut(),
+        Accum::Replace,
+        j.transpose(),
+        rv,
+        1.0,
+        Par::Seq,
+    );
+    let mut out = vec![0.0; n * n];
     for i in 0..n {
-        for k in 0..i {
-            jtj[i * n + k] = jtj[k * n + i];
+        for k in 0..n {
+            // Symmetric by construction up to rounding; take one triangle for exact symmetry.
+            out[i * n + k] = if k >= i { jtj[(i, k)] } else { jtj[(k, i)] };
         }
     }
-    (jtj, jtr)
+    (out, (0..n).map(|i| jtr[(i, 0)]).collect())
 }
