@@ -330,18 +330,13 @@ impl Tracker<'_> {
         let r = frame.residuals(tracker, &frame.params);
         let m = r.len();
         let mut jx = vec![0.0; m * p];
-        let mut params = frame.params.clone();
-        for c in 0..p {
-            let x = params[c];
-            params[c] = x + STEP;
-            let plus = frame.residuals(tracker, &params);
-            params[c] = x - STEP;
-            let minus = frame.residuals(tracker, &params);
-            params[c] = x;
-            for row in 0..m {
-                jx[row * p + c] = (plus[row] - minus[row]) / (2.0 * STEP);
-            }
-        }
+        tracker.frame_jacobian(
+            &frame.obs,
+            &frame.robust,
+            frame.root0,
+            &frame.params,
+            &mut jx,
+        );
         let mut jb = vec![0.0; m * nb];
         for (k, (plus, minus)) in shifted.iter().enumerate() {
             let plus = frame.residuals(plus, &frame.params);

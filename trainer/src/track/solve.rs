@@ -533,6 +533,31 @@ impl<'a> Tracker<'a> {
         problem.residuals(params, &mut ws, out);
     }
 
+    /// The Jacobian of [`Self::frame_residuals`] with respect to `params` (row-major, one row
+    /// per residual), by the chain rule of the tracker's own fit.
+    pub(super) fn frame_jacobian(
+        &self,
+        obs: &[Observation],
+        robust: &[f64],
+        root0: DQuat,
+        params: &[f64],
+        out: &mut [f64],
+    ) {
+        let problem = Problem::keypoints(self, obs, robust, root0, None);
+        let mut ws = Workspace::new(self, obs.len());
+        if !problem.jacobian(params, &mut ws, out) {
+            let m = self.frame_residual_count(obs);
+            let (mut plus, mut minus) = (vec![0.0; m], vec![0.0; m]);
+            problem.jacobian_by_differences(
+                &mut params.to_vec(),
+                &mut ws,
+                out,
+                &mut plus,
+                &mut minus,
+            );
+        }
+    }
+
     /// One frame's reprojection error (pixels) of every observation at `params`, the alignment
     /// layer weighted by confidence alone; what the calibration's robust weights come from.
     pub(super) fn frame_errors(
