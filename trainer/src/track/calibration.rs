@@ -100,7 +100,7 @@ impl Frame {
     /// Residuals at `params` on `tracker`'s skeleton.
     fn residuals(&self, tracker: &Tracker<'_>, params: &[f64]) -> Vec<f64> {
         let mut out = vec![0.0; tracker.frame_residual_count(&self.obs)];
-        tracker.frame_residuals(&self.obs, &self.robust, self.root0, params, &mut out);
+        tracker.frame_residuals(&self.obs, &self.robust, self.root0, params, &mut out, None);
         out
     }
 
@@ -327,15 +327,15 @@ impl Tracker<'_> {
     ) -> Block {
         let p = frame.params.len();
         let nb = shifted.len();
-        let r = frame.residuals(tracker, &frame.params);
-        let m = r.len();
-        let mut jx = vec![0.0; m * p];
-        tracker.frame_jacobian(
+        let m = tracker.frame_residual_count(&frame.obs);
+        let (mut r, mut jx) = (vec![0.0; m], vec![0.0; m * p]);
+        tracker.frame_residuals(
             &frame.obs,
             &frame.robust,
             frame.root0,
             &frame.params,
-            &mut jx,
+            &mut r,
+            Some(&mut jx),
         );
         let mut jb = vec![0.0; m * nb];
         for (k, (plus, minus)) in shifted.iter().enumerate() {

@@ -518,8 +518,9 @@ impl<'a> Tracker<'a> {
 
     /// One frame's keypoint residuals (Eq. 6 under the fixed weights `robust`) and joint-limit
     /// residuals (Eq. 7) at `params` (the root's rotation vector relative to `root0`, then the
-    /// angles), without the temporal and silhouette terms; the skeleton calibration's per-frame
-    /// block.
+    /// angles), without the temporal and silhouette terms, into `out`; with `jacobian`, also
+    /// their derivative with respect to `params` (row-major, one row per residual), by the
+    /// tracker's own chain rule. The skeleton calibration's per-frame block.
     pub(super) fn frame_residuals(
         &self,
         obs: &[Observation],
@@ -527,31 +528,19 @@ impl<'a> Tracker<'a> {
         root0: DQuat,
         params: &[f64],
         out: &mut [f64],
+        jacobian: Option<&mut [f64]>,
     ) {
         let problem = Problem::keypoints(self, obs, robust, root0, None);
         let mut ws = Workspace::new(self, obs.len());
         problem.residuals(params, &mut ws, out);
-    }
-
-    /// The Jacobian of [`Self::frame_residuals`] with respect to `params` (row-major, one row
-    /// per residual), by the chain rule of the tracker's own fit.
-    pub(super) fn frame_jacobian(
-        &self,
-        obs: &[Observation],
-        robust: &[f64],
-        root0: DQuat,
-        params: &[f64],
-        out: &mut [f64],
-    ) {
-        let problem = Problem::keypoints(self, obs, robust, root0, None);
-        let mut ws = Workspace::new(self, obs.len());
-        if !problem.jacobian(params, &mut ws, out) {
-            let m = self.frame_residual_count(obs);
-            let (mut plus, mut minus) = (vec![0.0; m], vec![0.0; m]);
+        if let Some(jac) = jacobian
+            && !problem.jacobian(params, &mut ws, jac)
+        {
+            let (mut plus, mut minus) = (vec![0.0; out.len()], vec![0.0; out.len()]);
             problem.jacobian_by_differences(
                 &mut params.to_vec(),
                 &mut ws,
-                out,
+                jac,
                 &mut plus,
                 &mut minus,
             );
