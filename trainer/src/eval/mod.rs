@@ -561,9 +561,6 @@ pub fn evaluate_mesh_frames(
             frame_seed(options.seed, frame),
         )
         .map_err(|source| EvalError::Surface { frame, source })?;
-        let off_surface = distances_to_truth(&truth, &capture.template.triangles, &posed)
-            .into_iter()
-            .fold(0.0f32, f32::max);
         out.push(FrameMetrics {
             frame,
             m2s_cm: m.m2s * 100.0,
@@ -571,7 +568,7 @@ pub fn evaluate_mesh_frames(
             max_vertex_cm: max_vertex_distance(&posed, &truth)
                 .filter(|_| corresponds)
                 .map(|d| d * 100.0),
-            max_off_surface_cm: f64::from(off_surface) * 100.0,
+            max_off_surface_cm: m.max_vertex_off * 100.0,
         });
     }
     Ok(out)
@@ -714,19 +711,8 @@ pub fn per_vertex_m2s(
     posed: &[Vec3],
 ) -> Result<Vec<f32>, EvalError> {
     let truth = capture.evaluation_gt_mesh(frame)?;
-    Ok(distances_to_truth(
-        &truth,
-        &capture.template.triangles,
-        posed,
-    ))
-}
-
-/// Distance from each of `points` to the surface of `truth` (positions) and `triangles`.
-fn distances_to_truth(truth: &[Vec3], triangles: &[[u32; 3]], points: &[Vec3]) -> Vec<f32> {
-    surface::distances_to(
-        points,
-        &crate::triangle_bvh::TriangleBvh::new(truth, triangles),
-    )
+    let bvh = crate::triangle_bvh::TriangleBvh::new(&truth, &capture.template.triangles);
+    Ok(surface::distances_to(posed, &bvh))
 }
 pub mod render;
 #[cfg(test)]

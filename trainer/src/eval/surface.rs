@@ -114,13 +114,15 @@ pub fn mean(values: &[f32]) -> f64 {
     values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len() as f64
 }
 
-/// M2S and S2M of one frame, in metres.
+/// M2S and S2M of one frame, and the recovered mesh's vertex furthest off the truth, in metres.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SurfaceMetrics {
     /// Mean distance from the recovered surface to the ground truth.
     pub m2s: f64,
     /// Mean distance from the ground truth to the recovered surface.
     pub s2m: f64,
+    /// Largest distance from a vertex of the recovered surface to the ground truth.
+    pub max_vertex_off: f64,
 }
 
 impl SurfaceMetrics {
@@ -131,7 +133,8 @@ impl SurfaceMetrics {
     }
 }
 
-/// M2S and S2M between two surfaces from `samples` points on each.
+/// M2S and S2M between two surfaces from `samples` points on each, and the largest distance
+/// from a vertex of `recovered` to `ground_truth` (against the same BVH as M2S).
 ///
 /// The two sample sets use different streams derived from `seed`, and the same `seed` on
 /// surfaces with the same triangles gives the same triangle choices, so comparing methods on
@@ -154,6 +157,11 @@ pub fn surface_metrics(
     Ok(SurfaceMetrics {
         m2s: mean(&distances_to(&on_recovered, &truth_bvh)),
         s2m: mean(&distances_to(&on_truth, &recovered_bvh)),
+        max_vertex_off: f64::from(
+            distances_to(recovered.positions, &truth_bvh)
+                .into_iter()
+                .fold(0.0f32, f32::max),
+        ),
     })
 }
 
