@@ -543,6 +543,7 @@ impl<'a> Tracker<'a> {
                 jac,
                 &mut plus,
                 &mut minus,
+                jacobian::STEP,
             );
         }
     }
@@ -856,7 +857,14 @@ fn levenberg_marquardt(
     let mut trial = params.to_vec();
     for it in 0..max_iterations {
         if !problem.jacobian(params, ws, &mut jac) {
-            problem.jacobian_by_differences(params, ws, &mut jac, &mut plus, &mut minus);
+            problem.jacobian_by_differences(
+                params,
+                ws,
+                &mut jac,
+                &mut plus,
+                &mut minus,
+                jacobian::STEP,
+            );
         }
         let (jtj, jtr) = normal_equations(&jac, &r, n);
         let gradient = jtr.iter().map(|g| g.abs()).fold(0.0, f64::max);

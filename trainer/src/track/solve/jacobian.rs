@@ -33,7 +33,7 @@ use super::{Problem, Workspace};
 use crate::track::silhouette::{outline_residual_gradient, projection_jacobian};
 
 /// Step of the differences (parameters are radians, or tenths of the skeleton's size).
-const STEP: f64 = 1e-6;
+pub(super) const STEP: f64 = 1e-6;
 
 impl Problem<'_, '_> {
     /// Fills `jac` (row-major, [`Self::residual_count`] × `params.len()`) by the chain rule
@@ -153,21 +153,9 @@ impl Problem<'_, '_> {
         true
     }
 
-    /// Fills `jac` by central differences of the whole residual with the tracker's step
-    /// (`plus` and `minus`: scratch of [`Self::residual_count`] entries).
+    /// Fills `jac` by central differences of the whole residual with step `h` ([`STEP`] for
+    /// the tracker's own; `plus` and `minus`: scratch of [`Self::residual_count`] entries).
     pub(super) fn jacobian_by_differences(
-        &self,
-        params: &mut [f64],
-        ws: &mut Workspace,
-        jac: &mut [f64],
-        plus: &mut [f64],
-        minus: &mut [f64],
-    ) {
-        self.differences_with_step(params, ws, jac, plus, minus, STEP);
-    }
-
-    /// [`Self::jacobian_by_differences`] with step `h`.
-    fn differences_with_step(
         &self,
         params: &mut [f64],
         ws: &mut Workspace,
@@ -323,17 +311,23 @@ mod tests {
 
         for problem in [&plain, &with_masks] {
             let (m, n) = (problem.residual_count(), params.len());
+            let mut differences_with = |h: f64| {
+                let mut jac = vec![0.0; m * n];
+                let (mut plus, mut minus) = (vec![0.0; m], vec![0.0; m]);
+                let mut probe = params.clone();
+                problem.jacobian_by_differences(
+                    &mut probe, &mut ws, &mut jac, &mut plus, &mut minus, h,
+                );
+                jac
+            };
+            let differences = differences_with(super::STEP);
+            // The masks' distances are single precision: over a step of 1e-6 a projection moves
+            // by about 1e-4 px, the size of their rounding, and the differences of the whole
+            // residual (the tracker's Jacobian before this one) are off by tens of percent per
+            // entry. A step of 1e-4 moves it by 0.01 px.
+            let coarse = differences_with(1e-4);
             let mut chain = vec![0.0; m * n];
-            let mut differences = vec![0.0; m * n];
-            let (mut plus, mut minus) = (vec![0.0; m], vec![0.0; m]);
             assert!(problem.jacobian(&params, &mut ws, &mut chain));
-            problem.jacobian_by_differences(
-                &mut params.clone(),
-                &mut ws,
-                &mut differences,
-                &mut plus,
-                &mut minus,
-            );
             let keypoints = 2 * obs.len();
             let priors = keypoints + problem.prior_count();
             let rk = relative_difference(&chain, &differences, n, 0..keypoints);
@@ -343,19 +337,7 @@ mod tests {
                 "keypoint rows {rk:e}, prior rows {rp:e}"
             );
             if problem.silhouette.is_some() {
-                // The masks' distances are single precision: over a step of 1e-6 a projection
-                // moves by about 1e-4 px, the size of their rounding, and the differences of
-                // the whole residual (the tracker's Jacobian before this one) are off by tens
-                // of percent per entry. A step of 1e-4 moves it by 0.01 px.
-                problem.differences_with_step(
-                    &mut params.clone(),
-                    &mut ws,
-                    &mut differences,
-                    &mut plus,
-                    &mut minus,
-                    1e-4,
-                );
-                let rs = relative_difference(&chain, &differences, n, priors..m);
+                let rs = relative_difference(&chain, &coarse, n, priors..m);
                 assert!(rs < 1e-2, "silhouette rows {rs:e}");
             }
         }
