@@ -239,9 +239,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("writing {}", bones_path.display()))?;
         writeln!(
             out,
-            "skeleton calibrated on {} frames: keypoint RMS {:.3} → {:.3} px; largest bone \
-             offset {:.3} skeleton units ({}); per joint: {}",
+            "skeleton calibrated on {} frames in {:.1} s: keypoint RMS {:.3} → {:.3} px; \
+             largest bone offset {:.3} skeleton units ({}); per joint: {}",
             calibration.frames,
+            calibration.seconds,
             calibration.rms_before_px,
             calibration.rms_after_px,
             worst.1,

@@ -20,8 +20,9 @@
 //!   lengths' error into the angles; alternating recovered half of CesiumMan's shoulders in
 //!   four rounds. The normal equations have the bundle-adjustment structure (a block per
 //!   frame, coupled only through the lengths), solved by the Schur complement on the lengths:
-//!   Levenberg–Marquardt with a central-difference Jacobian, the robust (Geman–McClure) weights
-//!   at the tracker's final scale recomputed once.
+//!   Levenberg–Marquardt with the tracker's chain-rule Jacobian for the poses and an exact one
+//!   for the lengths (a length moves its whole subtree by one world vector), the robust
+//!   (Geman–McClure) weights at the tracker's final scale recomputed once.
 //! - *Only lengths*: an offset across a bone is, but for the side points, a constant turn of
 //!   its parent, which the per-frame angles already have. Free 3D offsets traded with those
 //!   turns on CesiumMan (exact detections: the elbows moved 2 mm across their bones while the
@@ -50,7 +51,8 @@ pub const MAX_CALIBRATION_FRAMES: usize = 32;
 pub const BONE_PRIOR: f64 = 0.1;
 /// Levenberg–Marquardt iterations per reweighting round (cap).
 const ITERATIONS: usize = 30;
-/// Central-difference step (radians for the poses, 1 % of the skeleton's size for the lengths).
+/// Central-difference step of the lengths (1 % of the skeleton's size) where the alignment
+/// layer has no solution and their exact derivatives do not exist.
 const STEP: f64 = 1e-6;
 
 /// The result of [`Tracker::calibrate_bones`].
@@ -66,6 +68,9 @@ pub struct BoneCalibration {
     pub rms_after_px: f64,
     /// Frames used.
     pub frames: usize,
+    /// Wall-clock seconds of the calibration (the joint fit of lengths and poses, not the
+    /// tracking before and after it).
+    pub seconds: f64,
 }
 
 /// One frame of a calibration: its observations, robust weights and pose parameters (the
@@ -87,6 +92,25 @@ struct Lengths {
 }
 
 impl Lengths {
+    /// Every bone of `tracker`'s skeleton that has a length, from its current offsets.
+    fn of(tracker: &Tracker<'_>) -> Self {
+        let k = &tracker.kinematics;
+        // A joint that translates per frame has no fixed length.
+        let translating = k.translating_joints();
+        Self {
+            movable: (0..k.joint_count())
+                .filter(|&j| k.parents()[j].is_some())
+                .filter(|j| !translating.contains(j))
+                .filter_map(|j| {
+                    let bone = k.bind_translation(j);
+                    (bone.length() > 1e-12).then(|| (j, bone.normalize()))
+                })
+                .collect(),
+            unit: 0.01 * k.bind_size(),
+            base: k.bone_offsets().to_vec(),
+        }
+    }
+
     fn offsets(&self, params: &[f64]) -> Vec<DVec3> {
         let mut out = self.base.clone();
         for (&(j, direction), p) in self.movable.iter().zip(params) {
@@ -147,6 +171,7 @@ impl Tracker<'_> {
         &self,
         frames: &[(&[Vec<Option<Detection>>], &FrameFit)],
     ) -> Result<BoneCalibration, TrackError> {
+        let start_time = std::time::Instant::now();
         let picked: Vec<usize> = if frames.len() <= MAX_CALIBRATION_FRAMES {
             (0..frames.len()).collect()
         } else {
@@ -167,20 +192,7 @@ impl Tracker<'_> {
                 params,
             });
         }
-        // A joint that translates per frame has no fixed length.
-        let translating = self.kinematics.translating_joints();
-        let lengths = Lengths {
-            movable: (0..self.kinematics.joint_count())
-                .filter(|&j| self.kinematics.parents()[j].is_some())
-                .filter(|j| !translating.contains(j))
-                .filter_map(|j| {
-                    let bone = self.kinematics.bind_translation(j);
-                    (bone.length() > 1e-12).then(|| (j, bone.normalize()))
-                })
-                .collect(),
-            unit: 0.01 * self.kinematics.bind_size(),
-            base: self.kinematics.bone_offsets().to_vec(),
-        };
+        let lengths = Lengths::of(self);
         let start: Vec<Vec<f64>> = data.iter().map(|f| f.params.clone()).collect();
         let mut b = vec![0.0; lengths.movable.len()];
         for frame in &mut data {
@@ -211,6 +223,7 @@ impl Tracker<'_> {
             rms_before_px: rms(self, &start),
             rms_after_px: rms(&calibrated, &fitted),
             frames: picked.len(),
+            seconds: start_time.elapsed().as_secs_f64(),
         })
     }
 
@@ -239,19 +252,9 @@ impl Tracker<'_> {
             &data.iter().map(|f| f.params.as_slice()).collect::<Vec<_>>(),
         );
         for _ in 0..ITERATIONS {
-            // The skeletons with one length moved either way, shared by every frame.
-            let shifted: Vec<(Tracker<'_>, Tracker<'_>)> = (0..nb)
-                .map(|k| {
-                    let mut plus = b.to_vec();
-                    let mut minus = b.to_vec();
-                    plus[k] += STEP;
-                    minus[k] -= STEP;
-                    (with(&plus), with(&minus))
-                })
-                .collect();
             let blocks: Vec<Block> = data
                 .iter()
-                .map(|frame| self.linearise(frame, &tracker, &shifted))
+                .map(|frame| self.linearise(frame, &tracker, lengths, b))
                 .collect();
             let mut v = vec![0.0; nb * nb];
             let mut gb: Vec<f64> = b.iter().map(|x| BONE_PRIOR * x).collect();
@@ -317,16 +320,19 @@ impl Tracker<'_> {
         }
     }
 
-    /// One frame's [`Block`] at its parameters on `tracker`, with the lengths' derivatives
-    /// from the `shifted` skeletons.
+    /// One frame's [`Block`] at its parameters on `tracker` (this tracker at lengths `b`).
+    /// The lengths' derivatives are exact ([`Tracker::frame_length_jacobian`]); where the
+    /// alignment layer has no solution they are central differences of the skeletons with one
+    /// length moved either way.
     fn linearise(
         &self,
         frame: &Frame,
         tracker: &Tracker<'_>,
-        shifted: &[(Tracker<'_>, Tracker<'_>)],
+        lengths: &Lengths,
+        b: &[f64],
     ) -> Block {
         let p = frame.params.len();
-        let nb = shifted.len();
+        let nb = b.len();
         let m = tracker.frame_residual_count(&frame.obs);
         let (mut r, mut jx) = (vec![0.0; m], vec![0.0; m * p]);
         tracker.frame_residuals(
@@ -338,11 +344,25 @@ impl Tracker<'_> {
             Some(&mut jx),
         );
         let mut jb = vec![0.0; m * nb];
-        for (k, (plus, minus)) in shifted.iter().enumerate() {
-            let plus = frame.residuals(plus, &frame.params);
-            let minus = frame.residuals(minus, &frame.params);
-            for row in 0..m {
-                jb[row * nb + k] = (plus[row] - minus[row]) / (2.0 * STEP);
+        let exact = tracker.frame_length_jacobian(
+            (&frame.obs, &frame.robust, frame.root0),
+            &frame.params,
+            &lengths.movable,
+            lengths.unit,
+            &mut jb,
+        );
+        if !exact {
+            let with = |k: usize, h: f64| {
+                let mut moved = b.to_vec();
+                moved[k] += h;
+                self.clone().with_bone_offsets(&lengths.offsets(&moved))
+            };
+            for k in 0..nb {
+                let plus = frame.residuals(&with(k, STEP), &frame.params);
+                let minus = frame.residuals(&with(k, -STEP), &frame.params);
+                for row in 0..m {
+                    jb[row * nb + k] = (plus[row] - minus[row]) / (2.0 * STEP);
+                }
             }
         }
         let (u, gx) = normal_equations(&jx, &r, p);
@@ -502,6 +522,60 @@ mod tests {
             .map(|d| tracker.fit(d, None).unwrap())
             .collect();
         (tracker, detections, fits)
+    }
+
+    /// The exact lengths' derivatives against central differences of the residuals on
+    /// skeletons with one length moved either way, at lengths and poses away from the fit,
+    /// with side points (landmarks off their joints) and uneven robust weights.
+    #[test]
+    fn the_length_jacobian_matches_central_differences() {
+        let skeleton = build_skeleton().unwrap();
+        let rig = camera_rig(6, 256, 256, 1);
+        let (tracker, frames, fits) =
+            track(&skeleton, &Kinematics::new(&skeleton), &rig.cameras, 2, 11);
+        let lengths = Lengths::of(&tracker);
+        let nb = lengths.movable.len();
+        assert!(nb > 10, "{nb} lengths");
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let b: Vec<f64> = (0..nb).map(|_| rng.random_range(-0.5..0.5)).collect();
+        let at = |b: &[f64]| tracker.clone().with_bone_offsets(&lengths.offsets(b));
+        for (detections, fit) in frames.iter().zip(&fits) {
+            let obs = tracker.observations(detections).unwrap();
+            let mut params = vec![0.02, -0.01, 0.03];
+            params.extend(fit.angles.iter().map(|a| a + rng.random_range(-0.05..0.05)));
+            let frame = Frame {
+                robust: (0..obs.len()).map(|_| rng.random_range(0.2..1.0)).collect(),
+                obs,
+                root0: fit.root_rotation,
+                params,
+            };
+            let m = at(&b).frame_residual_count(&frame.obs);
+            let mut exact = vec![0.0; m * nb];
+            assert!(at(&b).frame_length_jacobian(
+                (&frame.obs, &frame.robust, frame.root0),
+                &frame.params,
+                &lengths.movable,
+                lengths.unit,
+                &mut exact,
+            ));
+            let h = 1e-5;
+            let mut largest: f64 = 0.0;
+            let mut worst: f64 = 0.0;
+            for k in 0..nb {
+                let mut moved = b.clone();
+                moved[k] += h;
+                let plus = frame.residuals(&at(&moved), &frame.params);
+                moved[k] -= 2.0 * h;
+                let minus = frame.residuals(&at(&moved), &frame.params);
+                for row in 0..m {
+                    let difference = (plus[row] - minus[row]) / (2.0 * h);
+                    largest = largest.max(difference.abs());
+                    worst = worst.max((exact[row * nb + k] - difference).abs());
+                }
+            }
+            assert!(largest > 1.0, "the lengths move the keypoints: {largest}");
+            assert!(worst < 1e-6 * largest, "worst {worst} of {largest}");
+        }
     }
 
     /// A skeleton whose bones differ from the template's is seen in eight frames; the

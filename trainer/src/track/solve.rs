@@ -548,6 +548,24 @@ impl<'a> Tracker<'a> {
         }
     }
 
+    /// The derivative of [`Self::frame_residuals`] with respect to bone lengths, into `jac`
+    /// (row-major, one column per entry of `lengths`: a joint and the unit direction, in its
+    /// parent's frame, its local translation lengthens along, by `unit` per unit of the
+    /// parameter); `false` where the alignment layer has no solution.
+    pub(super) fn frame_length_jacobian(
+        &self,
+        frame: (&[Observation], &[f64], DQuat),
+        params: &[f64],
+        lengths: &[(usize, DVec3)],
+        unit: f64,
+        jac: &mut [f64],
+    ) -> bool {
+        let (obs, robust, root0) = frame;
+        let problem = Problem::keypoints(self, obs, robust, root0, None);
+        let mut ws = Workspace::new(self, obs.len());
+        problem.length_jacobian(params, &mut ws, lengths, unit, jac)
+    }
+
     /// One frame's reprojection error (pixels) of every observation at `params`, the alignment
     /// layer weighted by confidence alone; what the calibration's robust weights come from.
     pub(super) fn frame_errors(

@@ -30,6 +30,17 @@
 use glam::{DMat4, DVec3};
 
 use super::{Problem, Workspace};
+use crate::track::alignment::Alignment;
+
+/// What every column of one detection's two rows shares ([`Problem::detection_derivatives`]).
+struct DetectionDerivative {
+    /// Square root of its weight (confidence, hierarchical and robust).
+    weight_sqrt: f64,
+    /// The projection's derivative (pixels per world unit) at its aligned landmark.
+    projection: [glam::DVec2; 3],
+    /// The alignment translation's derivative with respect to its landmark.
+    alignment: glam::DMat3,
+}
 use crate::track::silhouette::{outline_residual_gradient, projection_jacobian};
 
 /// Step of the differences (parameters are radians, or tenths of the skeleton's size).
@@ -51,17 +62,7 @@ impl Problem<'_, '_> {
 
         // What the columns share: each detection's weight, projection derivative and the
         // alignment layer's derivative for its ray; each outline vertex's residual gradient.
-        let detections: Vec<(f64, [glam::DVec2; 3], glam::DMat3)> = self
-            .obs
-            .iter()
-            .enumerate()
-            .map(|(i, o)| {
-                let s = self.keypoint_weight(o, self.robust[i]).sqrt();
-                let x = ws.points[o.landmark] + shift;
-                let jp = projection_jacobian(&t.cameras[o.view], x);
-                (s, jp, alignment.jacobian(&ws.rays[i]))
-            })
-            .collect();
+        let detections = self.detection_derivatives(ws, &alignment);
         let outline: Vec<(usize, DVec3)> = match self.silhouette {
             Some(term) => {
                 term.body.skinning_matrices(&ws.worlds, &mut ws.skinning);
@@ -121,16 +122,7 @@ impl Problem<'_, '_> {
             for ((d, a), b) in d_points.iter_mut().zip(&points_plus).zip(&points_minus) {
                 *d = (*a - *b) / (2.0 * STEP);
             }
-            let mut d_shift = DVec3::ZERO;
-            for (o, det) in self.obs.iter().zip(&detections) {
-                d_shift += det.2 * d_points[o.landmark];
-            }
-            for (i, (o, (s, jp, _))) in self.obs.iter().zip(&detections).enumerate() {
-                let dx = d_points[o.landmark] + d_shift;
-                let dp = jp[0] * dx.x + jp[1] * dx.y + jp[2] * dx.z;
-                jac[(2 * i) * n + c] = s * dp.x;
-                jac[(2 * i + 1) * n + c] = s * dp.y;
-            }
+            let d_shift = self.keypoint_column(&d_points, &detections, jac, n, c);
             for (k, (a, b)) in prior_plus.iter().zip(&prior_minus).enumerate() {
                 jac[(prior_row + k) * n + c] = (a - b) / (2.0 * STEP);
             }
@@ -151,6 +143,106 @@ impl Problem<'_, '_> {
             }
         }
         true
+    }
+
+    /// Fills `jac` (row-major, [`Self::residual_count`] × `lengths.len()`) with the residuals'
+    /// derivatives with respect to bone lengths at `params`: column `k` lengthens joint
+    /// `lengths[k].0`'s local translation along the unit direction `lengths[k].1` (its parent's
+    /// frame) by `unit` per unit of the parameter, as the skeleton calibration parametrises
+    /// them. `false`, with `jac` unspecified, when the alignment layer has no solution.
+    ///
+    /// Exact and without differences: a bone's length moves every joint below it by the same
+    /// world vector, `∂X_l/∂b_k = unit · R_parent(k) d_k` for the landmarks of that subtree and
+    /// zero elsewhere; the alignment layer and the projections follow as in [`Self::jacobian`].
+    /// The limit, translation-prior and temporal rows do not depend on the lengths. Keypoint
+    /// problems only: a silhouette term's rows are left zero (the calibration has none).
+    pub(super) fn length_jacobian(
+        &self,
+        params: &[f64],
+        ws: &mut Workspace,
+        lengths: &[(usize, DVec3)],
+        unit: f64,
+        jac: &mut [f64],
+    ) -> bool {
+        debug_assert!(self.silhouette.is_none(), "keypoint problems only");
+        let t = self.tracker;
+        let n = lengths.len();
+        let (_, alignment) = self.root_and_alignment(params, ws);
+        let Some(alignment) = alignment else {
+            return false;
+        };
+        jac.fill(0.0);
+        let parents = t.kinematics.parents();
+        let detections = self.detection_derivatives(ws, &alignment);
+        let mut d_points = vec![DVec3::ZERO; t.landmarks.len()];
+        for (c, &(joint, direction)) in lengths.iter().enumerate() {
+            let Some(parent) = parents[joint] else {
+                continue;
+            };
+            let moved = ws.worlds[parent].transform_vector3(direction) * unit;
+            for (d, l) in d_points.iter_mut().zip(&t.landmarks) {
+                let mut a = Some(l.joint);
+                *d = DVec3::ZERO;
+                while let Some(x) = a {
+                    if x == joint {
+                        *d = moved;
+                        break;
+                    }
+                    a = parents[x];
+                }
+            }
+            self.keypoint_column(&d_points, &detections, jac, n, c);
+        }
+        true
+    }
+
+    /// Per detection, what every column of its rows shares: the square root of its weight, the
+    /// projection's derivative at its landmark (shifted by the alignment layer's translation)
+    /// and the alignment layer's derivative for its ray (`ws` as [`Self::root_and_alignment`]
+    /// left it).
+    fn detection_derivatives(
+        &self,
+        ws: &Workspace,
+        alignment: &Alignment,
+    ) -> Vec<DetectionDerivative> {
+        let t = self.tracker;
+        self.obs
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                let x = ws.points[o.landmark] + alignment.translation;
+                DetectionDerivative {
+                    weight_sqrt: self.keypoint_weight(o, self.robust[i]).sqrt(),
+                    projection: projection_jacobian(&t.cameras[o.view], x),
+                    alignment: alignment.jacobian(&ws.rays[i]),
+                }
+            })
+            .collect()
+    }
+
+    /// Writes column `c` of the keypoint rows (of a row-major `jac` with `n` columns) from the
+    /// landmarks' derivatives `d_points`, the alignment layer's response included; returns that
+    /// response, the translation's derivative `∂t/∂p`.
+    fn keypoint_column(
+        &self,
+        d_points: &[DVec3],
+        detections: &[DetectionDerivative],
+        jac: &mut [f64],
+        n: usize,
+        c: usize,
+    ) -> DVec3 {
+        let mut d_shift = DVec3::ZERO;
+        for (o, det) in self.obs.iter().zip(detections) {
+            d_shift += det.alignment * d_points[o.landmark];
+        }
+        for (i, (o, det)) in self.obs.iter().zip(detections).enumerate() {
+            let dx = d_points[o.landmark] + d_shift;
+            let jp = det.projection;
+            let dp = jp[0] * dx.x + jp[1] * dx.y + jp[2] * dx.z;
+            jac[(2 * i) * n + c] = det.weight_sqrt * dp.x;
+            jac[(2 * i + 1) * n + c] = det.weight_sqrt * dp.y;
+        }
+        d_shift
     }
 
     /// Fills `jac` by central differences of the whole residual with step `h` ([`STEP`] for
