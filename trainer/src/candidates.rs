@@ -17,6 +17,13 @@
 //! (which is infinite between a skirt and the legs it must follow when they are separate
 //! surfaces).
 //!
+//! The lists are generous on purpose. An inner thigh sees the other thigh's bone, so its list
+//! holds the other hip and knee, and silhouettes alone can put such a vertex on the other knee.
+//! Narrower rules measured on the built-in capture (neighbours of strong support only; two
+//! skeleton edges from the strongest joint; the strongest joint's chain plus the first joint of
+//! each branch) cost SkinNet 12–40 % of Chamfer (0.650 → 0.729–0.904 cm) for the few
+//! centimetres they took off those vertices (`docs/experiments/fidelity.md`).
+//!
 //! The runtime must rebuild the lists for meshes of any resolution, so the `.skf` stores the
 //! training template's vertices as anchors with their lists, and every point takes the list of
 //! its nearest anchor (`skinfield_runtime::candidates::nearest_anchors`); training uses the same
