@@ -20,7 +20,9 @@ pub mod synthetic;
 pub use alignment::{Alignment, Ray, global_alignment};
 pub use calibration::BoneCalibration;
 pub use kinematics::{Kinematics, Landmark};
-pub use solve::{Detection, FrameFit, FrameReport, TrackError, TrackOptions, Tracker};
+pub use solve::{
+    Detection, FrameFit, FrameReport, JacobianMethod, TrackError, TrackOptions, Tracker,
+};
 
 #[cfg(test)]
 pub(crate) mod tests {

@@ -76,6 +76,21 @@ pub struct TrackOptions {
     /// translates them (inverse-kinematics feet parented to the root, a pelvis moved relative
     /// to a root that stays put); see [`Kinematics::with_translating_joints`].
     pub translating_joints: Vec<String>,
+    /// How the residuals are differentiated.
+    pub jacobian: JacobianMethod,
+}
+
+/// How the tracker differentiates its residuals with respect to the pose (and, in the skeleton
+/// calibration, the bone lengths).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum JacobianMethod {
+    /// The chain rule through the alignment layer (`track/solve/jacobian.rs`), falling back
+    /// to differences where the layer has no solution.
+    #[default]
+    ChainRule,
+    /// Central differences of the whole residual: the slower reference the chain rule is
+    /// tested and benchmarked against.
+    Differences,
 }
 
 impl Default for TrackOptions {
@@ -92,6 +107,7 @@ impl Default for TrackOptions {
             silhouette_weight: 1.0,
             calibration_rounds: 0,
             translating_joints: Vec::new(),
+            jacobian: JacobianMethod::default(),
         }
     }
 }
@@ -534,7 +550,7 @@ impl<'a> Tracker<'a> {
         let mut ws = Workspace::new(self, obs.len());
         problem.residuals(params, &mut ws, out);
         if let Some(jac) = jacobian
-            && !problem.jacobian(params, &mut ws, jac)
+            && !problem.jacobian_by_chain_rule(params, &mut ws, jac)
         {
             let (mut plus, mut minus) = (vec![0.0; out.len()], vec![0.0; out.len()]);
             problem.jacobian_by_differences(
@@ -561,6 +577,9 @@ impl<'a> Tracker<'a> {
         jac: &mut [f64],
     ) -> bool {
         let (obs, robust, root0) = frame;
+        if self.options.jacobian == JacobianMethod::Differences {
+            return false;
+        }
         let problem = Problem::keypoints(self, obs, robust, root0, None);
         let mut ws = Workspace::new(self, obs.len());
         problem.length_jacobian(params, &mut ws, lengths, unit, jac)
@@ -672,6 +691,12 @@ impl<'t, 'a> Problem<'t, 'a> {
             1.0
         };
         o.confidence * lambda * robust
+    }
+
+    /// [`Self::jacobian`] under [`TrackOptions::jacobian`]: `false` (`jac` unspecified) where
+    /// the chain rule does not apply or differences were asked for.
+    fn jacobian_by_chain_rule(&self, params: &[f64], ws: &mut Workspace, jac: &mut [f64]) -> bool {
+        self.tracker.options.jacobian == JacobianMethod::ChainRule && self.jacobian(params, ws, jac)
     }
 
     /// Root rotation and alignment-layer shift for `params` (landmarks left in `ws.points`).
@@ -874,7 +899,7 @@ fn levenberg_marquardt(
     let mut mu = 1e-3;
     let mut trial = params.to_vec();
     for it in 0..max_iterations {
-        if !problem.jacobian(params, ws, &mut jac) {
+        if !problem.jacobian_by_chain_rule(params, ws, &mut jac) {
             problem.jacobian_by_differences(
                 params,
                 ws,
