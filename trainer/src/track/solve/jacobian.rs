@@ -26,11 +26,15 @@
 //! distances are single precision, so differences with the tracker's step of 1e-6 move a
 //! projection by about their rounding and are off by tens of percent there.
 //! Where the alignment layer has no solution the caller falls back to differencing everything.
+//!
+//! The skeleton calibration's bone-length columns ([`Problem::length_jacobian`]) need no
+//! differences at all: a length moves its whole subtree by one world vector.
 
 use glam::{DMat4, DVec3};
 
 use super::{Problem, Workspace};
 use crate::track::alignment::Alignment;
+use crate::track::silhouette::{outline_residual_gradient, projection_jacobian};
 
 /// What every column of one detection's two rows shares ([`Problem::detection_derivatives`]).
 struct DetectionDerivative {
@@ -41,7 +45,6 @@ struct DetectionDerivative {
     /// The alignment translation's derivative with respect to its landmark.
     alignment: glam::DMat3,
 }
-use crate::track::silhouette::{outline_residual_gradient, projection_jacobian};
 
 /// Step of the differences (parameters are radians, or tenths of the skeleton's size).
 pub(super) const STEP: f64 = 1e-6;
