@@ -244,6 +244,14 @@ pub struct CheckSummary {
     pub failures: Vec<(usize, f64, f64)>,
 }
 
+impl CheckSummary {
+    /// No frame failed.
+    #[must_use]
+    pub fn passed(&self) -> bool {
+        self.failures.is_empty()
+    }
+}
+
 impl From<WorstVertexCheck> for CheckSummary {
     fn from(c: WorstVertexCheck) -> Self {
         Self {
@@ -611,7 +619,7 @@ fn thousands(n: usize) -> String {
 fn check_cell(check: Option<&CheckSummary>, size: f64) -> String {
     match check {
         None => "–".into(),
-        Some(c) if c.failures.is_empty() => format!("yes ({} frames)", c.frames),
+        Some(c) if c.passed() => format!("yes ({} frames)", c.frames),
         Some(c) => {
             let excess = c
                 .failures
@@ -634,7 +642,7 @@ fn check_cell(check: Option<&CheckSummary>, size: f64) -> String {
 
 /// Which characters meet the ordering and each worst-vertex check, as one paragraph.
 fn criteria_summary(results: &[ZooResult]) -> String {
-    let passed = |c: &Option<CheckSummary>| c.as_ref().is_some_and(|c| c.failures.is_empty());
+    let passed = |c: &Option<CheckSummary>| c.as_ref().is_some_and(CheckSummary::passed);
     let names = |keep: &dyn Fn(&ZooResult) -> bool| -> String {
         let met: Vec<&str> = results
             .iter()
