@@ -310,11 +310,15 @@ impl PreparedSkinning {
                 skin: bounds::best_static_weights(capture)?,
                 blend: Blend::Linear,
             },
+            // The ceiling keeps the generous lists (no gate on the neighbours): a prior of
+            // ours should not lower the bound it is measured against.
             Skinning::BoundPose => Weights::BestPosed {
                 candidates: crate::candidates::candidate_sets(
                     &crate::losses::dense_weights(&initial()?),
                     &capture.skeleton,
+                    &capture.template.positions,
                     crate::candidates::DEFAULT_CANDIDATES,
+                    f32::INFINITY,
                 ),
             },
             Skinning::Static(path) => Weights::Static {

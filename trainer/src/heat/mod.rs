@@ -39,7 +39,7 @@
 //! and skeleton together, and all tolerances are relative, so the weights are too.
 
 mod attach;
-mod bones;
+pub(crate) mod bones;
 mod laplacian;
 mod pieces;
 mod solve;

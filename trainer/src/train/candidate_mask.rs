@@ -17,15 +17,21 @@ pub(super) struct Candidates {
 
 impl Candidates {
     /// The candidates of `data`'s training vertices ([`crate::candidates::candidate_sets`] with
-    /// `k` joints; `None` when `k` is 0), and the initial weights of `data` — the warm start's
+    /// `k` joints and neighbour reach `reach`; `None` when `k` is 0), and the initial weights of `data` — the warm start's
     /// target and the regularisers' reference — restricted to them and renormalised, since
     /// weights outside the candidates cannot be represented.
-    pub(super) fn new(data: &mut TrainData, k: usize) -> Option<Self> {
+    pub(super) fn new(data: &mut TrainData, k: usize, reach: f32) -> Option<Self> {
         if k == 0 {
             return None;
         }
         let j = data.skeleton.len();
-        let lists = crate::candidates::candidate_sets(&data.init_weights, &data.skeleton, k);
+        let lists = crate::candidates::candidate_sets(
+            &data.init_weights,
+            &data.skeleton,
+            &data.template.positions,
+            k,
+            reach,
+        );
         restrict(&mut data.init_weights, j, &lists, |i| i);
         let mask_values = crate::candidates::additive_mask(&lists, j);
         let v = lists.len();

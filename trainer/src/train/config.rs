@@ -145,6 +145,11 @@ pub struct TrainConfig {
     /// baseline's) softmax ranges over at most this many joints near each point, the rest
     /// weigh exactly zero; 0 turns the restriction off.
     pub candidate_joints: usize,
+    /// A skeleton neighbour of a point's bone-heat support joins its candidates only if one of
+    /// its bones passes within this many times the point's distance to the support's bones
+    /// (`null` in JSON or infinite: no gate; [`crate::candidates::candidate_sets`]).
+    #[serde(with = "reach_serde")]
+    pub candidate_reach: f32,
     /// Training frames held out for validation from images ([`super::validation`]), spread
     /// evenly; at most a quarter of the frames, none (validate on the training frames) with
     /// fewer than four. 0 turns validation and best-average selection off.
@@ -226,6 +231,7 @@ impl Default for TrainConfig {
             consistent_queries: true,
             cubic_normalisation: true,
             candidate_joints: crate::candidates::DEFAULT_CANDIDATES,
+            candidate_reach: crate::candidates::DEFAULT_NEIGHBOUR_REACH,
             validation_frames: 4,
             validation_every: 100,
             refuse_worse_than_initial: true,
@@ -244,6 +250,24 @@ impl Default for TrainConfig {
             stages: super::stages::StageConfig::default(),
             pose_refinement: super::PoseRefinementConfig::default(),
         }
+    }
+}
+
+/// [`TrainConfig::candidate_reach`] in JSON: a number, or `null` for no gate (JSON has no
+/// infinity).
+mod reach_serde {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(super) fn serialize<S: Serializer>(reach: &f32, s: S) -> Result<S::Ok, S::Error> {
+        if reach.is_finite() {
+            s.serialize_f32(*reach)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
+        Ok(Option::<f32>::deserialize(d)?.unwrap_or(f32::INFINITY))
     }
 }
 
@@ -334,6 +358,9 @@ impl TrainConfig {
         }
         if self.candidate_joints > skinfield_formats::skf::candidates::MAX_CANDIDATES {
             return Err("candidate_joints");
+        }
+        if self.candidate_reach.is_nan() || self.candidate_reach <= 0.0 {
+            return Err("candidate_reach");
         }
         self.pose_refinement.validate()?;
         if self.validation_frames > 0 && self.validation_every == 0 {

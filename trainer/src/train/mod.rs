@@ -210,7 +210,8 @@ impl Trainer {
                 .collect();
             validation::score(&data, frames, &dense, &edges)
         };
-        let candidates = Candidates::new(&mut data, config.candidate_joints);
+        let candidates =
+            Candidates::new(&mut data, config.candidate_joints, config.candidate_reach);
         let t = &data.template;
         let dev = Device::Cpu;
         let bounds = t
