@@ -17,9 +17,9 @@ pub(super) struct Candidates {
 
 impl Candidates {
     /// The candidates of `data`'s training vertices ([`crate::candidates::candidate_sets`] with
-    /// `k` joints and neighbour reach `reach`; `None` when `k` is 0), and the initial weights of `data` — the warm start's
-    /// target and the regularisers' reference — restricted to them and renormalised, since
-    /// weights outside the candidates cannot be represented.
+    /// `k` joints and neighbour reach `reach`; `None` when `k` is 0), and the initial weights
+    /// of `data` — the warm start's target and the regularisers' reference — restricted to
+    /// them and renormalised, since weights outside the candidates cannot be represented.
     pub(super) fn new(data: &mut TrainData, k: usize, reach: f32) -> Option<Self> {
         if k == 0 {
             return None;

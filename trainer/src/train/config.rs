@@ -431,4 +431,34 @@ mod tests {
         std::fs::write(&p, r#"{"iterations": 5}"#).unwrap();
         assert_eq!(TrainConfig::load(&p).unwrap().iterations, 5);
     }
+
+    #[test]
+    fn the_candidate_reach_is_a_number_or_null_and_positive() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.json");
+        let load = |text: &str| {
+            std::fs::write(&p, text).unwrap();
+            TrainConfig::load(&p)
+        };
+        // JSON has no infinity: the default (no gate) is written as null and read back.
+        let text = serde_json::to_string(&TrainConfig::default()).unwrap();
+        assert!(text.contains(r#""candidate_reach":null"#), "{text}");
+        assert_eq!(
+            load(r#"{"candidate_reach": null}"#)
+                .unwrap()
+                .candidate_reach,
+            f32::INFINITY
+        );
+        assert_eq!(
+            load(r#"{"candidate_reach": 2.0}"#).unwrap().candidate_reach,
+            2.0
+        );
+        assert!(matches!(
+            load(r#"{"candidate_reach": 0}"#),
+            Err(ConfigError::Field {
+                field: "candidate_reach",
+                ..
+            })
+        ));
+    }
 }
