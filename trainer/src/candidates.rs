@@ -94,25 +94,24 @@ pub fn candidate_sets(
                 list.push(order[0]);
             }
             let support = list.clone();
+            // The gate's bones, the point and the farthest a neighbour's bone may be; without
+            // the gate every neighbour is within reach.
             let limit = bones.as_ref().map(|b| {
                 let x = x.as_dvec3();
                 let d = support
                     .iter()
                     .map(|&s| b.distance(s, x))
                     .fold(f64::INFINITY, f64::min);
-                (x, f64::from(reach) * d)
+                (b, x, f64::from(reach) * d)
             });
+            let within = |n: usize| limit.is_none_or(|(b, x, l)| b.distance(n, x) <= l);
             for &s in &support {
                 let near = parents[s].into_iter().chain(children[s].iter().copied());
                 for n in near {
                     if list.len() >= k {
                         break;
                     }
-                    let within = match (&bones, limit) {
-                        (Some(b), Some((x, limit))) => b.distance(n, x) <= limit,
-                        _ => true,
-                    };
-                    if within && !list.contains(&n) {
+                    if !list.contains(&n) && within(n) {
                         list.push(n);
                     }
                 }
@@ -149,7 +148,7 @@ impl BonesOfJoints {
     fn distance(&self, joint: usize, x: DVec3) -> f64 {
         self.per_joint[joint]
             .iter()
-            .map(|s| (s.closest_point(x) - x).length())
+            .map(|s| s.closest_point(x).distance(x))
             .fold(f64::INFINITY, f64::min)
     }
 }
