@@ -3,29 +3,9 @@
 
 mod common;
 
-use common::trainer;
+use common::{tiny_synth, trainer};
 use skinfield_formats::capture::load_capture;
 use skinfield_trainer::train::validation::held_out_indices;
-
-/// `trainer synth` of a small built-in capture into `out` (`train_frames` training frames, one
-/// test frame), plus `extra`.
-fn tiny_synth(out: &str, train_frames: &str, extra: &[&str]) -> (i32, String, String) {
-    let mut args = vec![
-        "synth",
-        "--out",
-        out,
-        "--grid",
-        "40",
-        "--vertices",
-        "2500",
-        "--train-frames",
-        train_frames,
-        "--test-frames",
-        "1",
-    ];
-    args.extend_from_slice(extra);
-    trainer(&args)
-}
 
 #[test]
 fn a_capture_without_motion_is_tracked_and_only_then_trained() {

@@ -3,7 +3,7 @@
 //! evaluate on the held-out test poses, print the table and write it with plots and pictures.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
@@ -18,6 +18,7 @@ use skinfield_trainer::eval::{EvalOptions, PreparedSkinning, Skinning, evaluate,
 use skinfield_trainer::synth::{SynthConfig, synthesize};
 use skinfield_trainer::train::TrainConfig;
 use skinfield_trainer::train::data::{DataOptions, initial_weights};
+use skinfield_trainer::train::ensemble::EnsembleConfig;
 
 use super::train::{train_skinnet, train_static};
 
@@ -49,6 +50,11 @@ pub struct Args {
     /// Training-template vertex count for SkinNet.
     #[arg(long, default_value_t = DataOptions::default().train_vertices)]
     pub train_vertices: usize,
+    /// SkinNets trained from consecutive seeds (each with the whole warm start and image
+    /// schedule) whose mean weights are distilled into the exported one (`ensemble.members`
+    /// of the training configuration); 1: a single network. Not used by `--ablations`.
+    #[arg(long, default_value_t = TrainConfig::default().ensemble.members)]
+    pub ensemble: usize,
     /// Hide the progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -157,8 +163,15 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         seed,
         iterations: args.iterations,
         warm_start_iterations: args.warm_start,
+        ensemble: EnsembleConfig {
+            members: args.ensemble,
+            ..EnsembleConfig::default()
+        },
         ..TrainConfig::default()
     };
+    config.validate().map_err(|field| {
+        anyhow::anyhow!("the arguments make an invalid training configuration: field `{field}`")
+    })?;
     let options = DataOptions {
         train_vertices: args.train_vertices,
         ..DataOptions::default()
@@ -193,11 +206,8 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         "train SkinNet (data + loop + export)",
         t.elapsed().as_secs_f64(),
     ));
-    // The warm start stops once converged: its log has one row per iteration run.
-    let warm_ran = std::fs::read_to_string(skin_work.join("warm_start.csv"))
-        .map(|t| t.lines().skip(1).filter(|l| !l.is_empty()).count() as u64)
-        .unwrap_or(args.warm_start);
-    let per_iteration = loop_s / (args.iterations + warm_ran).max(1) as f64;
+    let (warm_ran, image_ran) = iterations_run(&skin_work, &config);
+    let per_iteration = loop_s / (image_ran + warm_ran).max(1) as f64;
 
     let static_file = out.join("static_weights.json");
     let static_work = out.join("train-static");
@@ -264,7 +274,14 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         .with_context(|| json_path.display().to_string())?;
 
     // Plots (`trainer train` drew them in its work folders) and pictures.
-    for (work, who) in [(&skin_work, "skinnet"), (&static_work, "static")] {
+    // An ensemble ran its image iterations in its members' folders: the first member's plots
+    // stand for them.
+    let skin_plots = if config.ensemble.is_on() {
+        skin_work.join("member-0")
+    } else {
+        skin_work.clone()
+    };
+    for (work, who) in [(&skin_plots, "skinnet"), (&static_work, "static")] {
         for name in ["losses", "validation"] {
             let from = work.join(format!("{name}.svg"));
             let to = out.join(format!("{name}_{who}.svg"));
@@ -353,8 +370,19 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
     }
     let _ = writeln!(
         md,
-        "\nSkinNet: {} warm-start + {} image iterations at {} training vertices, {:.3} s per iteration on average.",
-        warm_ran, args.iterations, args.train_vertices, per_iteration
+        "\nSkinNet: {} warm-start + {} image iterations at {} training vertices{}, {:.3} s per iteration on average.",
+        warm_ran,
+        image_ran,
+        args.train_vertices,
+        if config.ensemble.is_on() {
+            format!(
+                " ({} ensemble members and the distillation of their mean)",
+                config.ensemble.members
+            )
+        } else {
+            String::new()
+        },
+        per_iteration
     );
     let _ = writeln!(md, "Total: {:.1} s.", total.elapsed().as_secs_f64());
     let md_path = out.join("results.md");
@@ -368,4 +396,26 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         out.display()
     );
     Ok(rows)
+}
+
+/// The warm-start and image iterations a SkinNet run in `work` went through. The warm start
+/// stops once converged, so its log (one row per iteration) counts it; an ensemble ran each
+/// member's warm start and image iterations in `work/member-K` and its distillation (logged as
+/// a warm start) in `work`.
+fn iterations_run(work: &Path, config: &TrainConfig) -> (u64, u64) {
+    let warm_rows = |dir: &Path| {
+        std::fs::read_to_string(dir.join("warm_start.csv"))
+            .map(|t| t.lines().skip(1).filter(|l| !l.is_empty()).count() as u64)
+            .unwrap_or(config.warm_start_iterations)
+    };
+    if config.ensemble.is_on() {
+        let members = config.ensemble.members;
+        let warm = (0..members)
+            .map(|k| warm_rows(&work.join(format!("member-{k}"))))
+            .sum::<u64>()
+            + warm_rows(work);
+        (warm, members as u64 * config.iterations)
+    } else {
+        (warm_rows(work), config.iterations)
+    }
 }

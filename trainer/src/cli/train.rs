@@ -9,7 +9,9 @@ use clap::Parser;
 use skinfield_formats::StaticSkin;
 use skinfield_formats::capture::{Capture, MotionFile, load_capture, transform_to_array};
 use skinfield_trainer::eval::static_weights::write_static_weights;
-use skinfield_trainer::train::data::{DataOptions, initial_weights, static_train_data, train_data};
+use skinfield_trainer::train::data::{
+    DataOptions, TrainData, initial_weights, static_train_data, train_data,
+};
 use skinfield_trainer::train::plot::plot_log;
 use skinfield_trainer::train::stages::{ColourSource, load_images};
 use skinfield_trainer::train::validation::held_out_indices;
@@ -133,13 +135,18 @@ pub fn train_skinnet(
     progress: bool,
 ) -> anyhow::Result<f64> {
     let data = train_data(capture, initial, options)?;
-    let mut trainer = Trainer::new(data, config, false)?;
-    if resume {
-        trainer.resume(&work.join("checkpoint.safetensors"))?;
-    }
     let start = Instant::now();
-    trainer.run(work, progress)?;
-    report_warm_start(&trainer);
+    let mut trainer = if config.ensemble.is_on() {
+        train_ensemble(data, config, work, resume, progress)?
+    } else {
+        let mut trainer = Trainer::new(data, config, false)?;
+        if resume {
+            trainer.resume(&work.join("checkpoint.safetensors"))?;
+        }
+        trainer.run(work, progress)?;
+        report_warm_start(&trainer);
+        trainer
+    };
     // The average of stage 1's iterates is the model; stages 2–4 continue from it.
     trainer.adopt_average()?;
     let stages = trainer.config().stages;
@@ -166,6 +173,63 @@ pub fn train_skinnet(
     }
     model.write(out)?;
     Ok(seconds)
+}
+
+/// Stage 1 as an ensemble ([`skinfield_trainer::train::ensemble`]): every member trained in
+/// `work/member-K` (seed `seed + K`), then a student in `work` distilled from their mean
+/// weights. Returns the student, ready for stages 2–4 and export; its image iterations are the
+/// members'.
+fn train_ensemble(
+    data: TrainData,
+    config: TrainConfig,
+    work: &Path,
+    resume: bool,
+    progress: bool,
+) -> anyhow::Result<Trainer> {
+    let members = config.ensemble.members;
+    let mut teachers = Vec::with_capacity(members);
+    for k in 0..members {
+        let member_config = TrainConfig {
+            seed: config.seed.wrapping_add(k as u64),
+            stages: Default::default(),
+            ensemble: Default::default(),
+            ..config.clone()
+        };
+        let dir = work.join(format!("member-{k}"));
+        println!(
+            "ensemble member {} of {members} (seed {}) in {}",
+            k + 1,
+            member_config.seed,
+            dir.display()
+        );
+        let mut member = Trainer::new(data.clone(), member_config, false)?;
+        let checkpoint = dir.join("checkpoint.safetensors");
+        if resume && checkpoint.exists() {
+            member.resume(&checkpoint)?;
+        }
+        member.run(&dir, progress)?;
+        report_warm_start(&member);
+        member.adopt_average()?;
+        let report = member.validation_report()?;
+        println!("  member {}: validation {}", k + 1, report.model);
+        plot_logs(&dir, &format!("SkinNet, ensemble member {}", k + 1))?;
+        teachers.push(member.frozen_net()?);
+    }
+    // The student's stage 1 is the distillation; its image iterations were the members'.
+    let student_config = TrainConfig {
+        iterations: 0,
+        ..config
+    };
+    let mut student = Trainer::new(data, student_config, false)?;
+    student.distil_from(teachers)?;
+    let checkpoint = work.join("checkpoint.safetensors");
+    if resume && checkpoint.exists() {
+        student.resume(&checkpoint)?;
+    }
+    println!("distilling the {members} members' mean weights into one SkinNet");
+    student.run(work, progress)?;
+    report_warm_start(&student);
+    Ok(student)
 }
 
 /// With pose refinement: writes `work/refined_motion.json`, the capture's motion with every
@@ -287,21 +351,32 @@ fn report_warm_start(trainer: &Trainer) {
     if w.iterations == 0 {
         return;
     }
+    let (what, consequence) = if trainer.is_distilling() {
+        (
+            "the distillation",
+            "the exported SkinNet differs from the ensemble's mean weights",
+        )
+    } else {
+        (
+            "the warm start",
+            "SkinNet starts away from the initial weights",
+        )
+    };
     if w.converged {
         println!(
-            "warm start converged after {} iterations (KL {:.4}, position error {:.1e} of the \
+            "{what} converged after {} iterations (KL {:.4}, position error {:.1e} of the \
              template's diagonal)",
             w.iterations, w.kl, w.position_relative
         );
     } else {
         eprintln!(
-            "warning: the warm start stopped at its cap of {} iterations without converging: \
+            "warning: {what} stopped at its cap of {} iterations without converging: \
              KL {:.4} (tolerance {}), position error {:.1e} of the template's diagonal \
-             (tolerance {:.1e}). SkinNet starts away from the initial weights; raise \
+             (tolerance {:.1e}). {consequence}; raise \
              `warm_start_iterations` in the training configuration.",
             w.iterations,
             w.kl,
-            c.warm_start_kl_tolerance,
+            trainer.warm_kl_tolerance(),
             w.position_relative,
             c.warm_start_position_tolerance
         );

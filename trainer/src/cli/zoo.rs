@@ -162,6 +162,9 @@ pub struct Budget {
     pub warm_start: u64,
     /// SkinNet image-loss iterations.
     pub iterations: u64,
+    /// SkinNets trained per character, their mean distilled into the one scored (the
+    /// configuration's `ensemble.members`).
+    pub members: usize,
     /// Static-baseline iterations.
     pub static_iterations: u64,
     /// SkinNet training-template vertices.
@@ -313,6 +316,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let budget = Budget {
         warm_start: config.warm_start_iterations,
         iterations: config.iterations,
+        members: config.ensemble.members,
         static_iterations: quick(args.static_iterations, config.iterations),
         train_vertices: DataOptions::default().train_vertices,
         seed: args.seed,
@@ -679,14 +683,24 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
     );
     let _ = writeln!(
         md,
-        "Budget per character: SkinNet {} warm-start + {} image iterations at {} training \
+        "Budget per character: SkinNet {}{} warm-start + {} image iterations{} at {} training \
          vertices, static baseline {} iterations; seed {}; captures of {} cameras at {}² pixels, \
          {} frames per training clip and {} per test clip. Methods: `initial` = bone heat (LBS), \
          `static` = learned pose-independent weights, `ours` = SkinNet, `oracle` = the ground \
          truth's own weights under LBS (the ground truth is DQS + flexion bulges, none on the \
          robot's rigid parts, and for the built-in character a skirt pushed out by the legs).\n",
+        if budget.members > 1 {
+            format!("{} × (", budget.members)
+        } else {
+            String::new()
+        },
         budget.warm_start,
         budget.iterations,
+        if budget.members > 1 {
+            ") from consecutive seeds, their mean weights distilled into the model scored"
+        } else {
+            ""
+        },
         budget.train_vertices,
         budget.static_iterations,
         budget.seed,
@@ -920,6 +934,7 @@ mod tests {
         let budget = Budget {
             warm_start: 1,
             iterations: 1,
+            members: 1,
             static_iterations: 1,
             train_vertices: 1,
             seed: 0,

@@ -208,6 +208,10 @@ pub struct TrainConfig {
     /// Per-frame pose corrections trained with the image losses (off by default; for captures
     /// with tracked motion, [`super::pose_refinement`]).
     pub pose_refinement: super::PoseRefinementConfig,
+    /// Several SkinNets from different seeds, their mean weights distilled into the exported
+    /// one ([`super::ensemble`]); one network by default. Not with pose refinement, whose
+    /// corrections belong to one run.
+    pub ensemble: super::ensemble::EnsembleConfig,
 }
 
 impl Default for TrainConfig {
@@ -249,6 +253,7 @@ impl Default for TrainConfig {
             silhouette_huber_px: crate::losses::silhouette::DEFAULT_HUBER_PX,
             stages: super::stages::StageConfig::default(),
             pose_refinement: super::PoseRefinementConfig::default(),
+            ensemble: super::ensemble::EnsembleConfig::default(),
         }
     }
 }
@@ -398,6 +403,10 @@ impl TrainConfig {
             return Err("pe_frequencies");
         }
         self.stages.validate()?;
+        self.ensemble.validate()?;
+        if self.ensemble.is_on() && self.pose_refinement.enabled {
+            return Err("ensemble.members");
+        }
         Ok(())
     }
 }
@@ -460,5 +469,39 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn an_ensemble_has_one_to_max_members_and_no_pose_refinement() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.json");
+        let field = |text: &str| {
+            std::fs::write(&p, text).unwrap();
+            match TrainConfig::load(&p) {
+                Ok(c) => Ok(c.ensemble.members),
+                Err(ConfigError::Field { field, .. }) => Err(field),
+                Err(e) => panic!("{e}"),
+            }
+        };
+        assert_eq!(field("{}"), Ok(1));
+        assert_eq!(field(r#"{"ensemble": {"members": 3}}"#), Ok(3));
+        let max = super::super::ensemble::MAX_MEMBERS;
+        assert_eq!(
+            field(&format!(r#"{{"ensemble": {{"members": {max}}}}}"#)),
+            Ok(max)
+        );
+        for bad in [
+            r#"{"ensemble": {"members": 0}}"#.to_string(),
+            format!(r#"{{"ensemble": {{"members": {}}}}}"#, max + 1),
+            r#"{"ensemble": {"members": 2}, "pose_refinement": {"enabled": true}}"#.to_string(),
+        ] {
+            assert_eq!(field(&bad), Err("ensemble.members"), "{bad}");
+        }
+        assert_eq!(
+            field(r#"{"ensemble": {"kl_tolerance": -1}}"#),
+            Err("ensemble.kl_tolerance")
+        );
+        // One network with pose refinement stays valid.
+        assert_eq!(field(r#"{"pose_refinement": {"enabled": true}}"#), Ok(1));
     }
 }

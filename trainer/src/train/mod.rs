@@ -22,6 +22,7 @@ mod candidate_mask;
 mod checkpoint;
 pub mod config;
 pub mod data;
+pub mod ensemble;
 mod error;
 pub mod plot;
 pub mod pose_refinement;
@@ -134,6 +135,9 @@ pub struct Trainer {
     validation_log: Vec<(u64, validation::ValidationScore)>,
     /// With [`PoseRefinementConfig::enabled`]: the training frames' pose corrections.
     pose_refinement: Option<pose_refinement::PoseRefinement>,
+    /// With [`Trainer::distil_from`]: the ensemble members whose mean weights the warm start
+    /// regresses instead of the initial weights.
+    teachers: Vec<TrainableSkinNet>,
 }
 
 /// Copies of parameters by name.
@@ -351,6 +355,7 @@ impl Trainer {
             best: None,
             validation_log: Vec::new(),
             pose_refinement,
+            teachers: Vec::new(),
         })
     }
 
@@ -381,8 +386,19 @@ impl Trainer {
         }
         let s = self.warm_status();
         self.warm_converged = self.warm_window.len() as u64 == self.config.warm_start_window
-            && s.kl <= self.config.warm_start_kl_tolerance
+            && s.kl <= self.warm_kl_tolerance()
             && s.position_relative <= self.config.warm_start_position_tolerance;
+    }
+
+    /// The warm start's KL tolerance: [`TrainConfig::warm_start_kl_tolerance`], or while
+    /// distilling [`ensemble::EnsembleConfig::kl_tolerance`].
+    #[must_use]
+    pub fn warm_kl_tolerance(&self) -> f64 {
+        if self.is_distilling() {
+            self.config.ensemble.kl_tolerance
+        } else {
+            self.config.warm_start_kl_tolerance
+        }
     }
 
     /// Adam's settings: the configured ones, with [`TrainConfig::static_lr`] for the static
@@ -656,11 +672,53 @@ impl Trainer {
     /// Weights `[B, V, J]` for the given frames, SkinNet queried at rows `query` (`[V]`) of the
     /// full-resolution query points, or at the training vertices themselves (`None`).
     fn weights_at(&self, frames: &[usize], query: Option<&Tensor>) -> Result<Tensor, TrainError> {
-        let poses: Vec<f32> = frames
+        self.weights_for_poses(self.pose_rows(frames), frames.len(), query)
+    }
+
+    /// The concatenated pose features of training frames `frames`.
+    fn pose_rows(&self, frames: &[usize]) -> Vec<f32> {
+        frames
             .iter()
             .flat_map(|&f| self.data.frames[f].pose_features.iter().copied())
-            .collect();
-        self.weights_for_poses(poses, frames.len(), query)
+            .collect()
+    }
+
+    /// The pose features `[B, 3J]` of training frames `frames`.
+    fn pose_tensor(&self, frames: &[usize]) -> Result<Tensor, TrainError> {
+        let j = self.data.skeleton.len();
+        Ok(Tensor::from_vec(
+            self.pose_rows(frames),
+            (frames.len(), 3 * j),
+            &Device::Cpu,
+        )?)
+    }
+
+    /// SkinNet's encoded input rows and candidate mask at query rows `query` of the
+    /// full-resolution query points, or at the training vertices (`None`).
+    fn net_rows(&self, query: Option<&Tensor>) -> Result<(Tensor, Option<Tensor>), TrainError> {
+        let Model::Net {
+            encoded,
+            query_encoded,
+            ..
+        } = &self.model
+        else {
+            return Err(TrainError::Data(
+                "the static baseline has no network".into(),
+            ));
+        };
+        Ok(match (query, query_encoded) {
+            (Some(q), Some(points)) => (
+                points.index_select(q, 0)?,
+                self.candidates
+                    .as_ref()
+                    .map(|c| c.query_mask.index_select(q, 0))
+                    .transpose()?,
+            ),
+            _ => (
+                encoded.clone(),
+                self.candidates.as_ref().map(|c| c.mask.clone()),
+            ),
+        })
     }
 
     /// Weights `[B, V, J]` for `b` poses given by their concatenated pose features.
@@ -672,24 +730,8 @@ impl Trainer {
     ) -> Result<Tensor, TrainError> {
         let j = self.data.skeleton.len();
         Ok(match &self.model {
-            Model::Net {
-                net,
-                encoded,
-                query_encoded,
-            } => {
-                let (rows, mask) = match (query, query_encoded) {
-                    (Some(q), Some(points)) => (
-                        points.index_select(q, 0)?,
-                        self.candidates
-                            .as_ref()
-                            .map(|c| c.query_mask.index_select(q, 0))
-                            .transpose()?,
-                    ),
-                    _ => (
-                        encoded.clone(),
-                        self.candidates.as_ref().map(|c| c.mask.clone()),
-                    ),
-                };
+            Model::Net { net, .. } => {
+                let (rows, mask) = self.net_rows(query)?;
                 net.forward_masked(
                     &rows,
                     &Tensor::from_vec(poses, (b, 3 * j), &Device::Cpu)?,

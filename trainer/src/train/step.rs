@@ -34,15 +34,24 @@ impl Trainer {
         let query = self.draw_queries(PHASE_WARM, self.warm_done)?;
         let w = self.weights_at(&frames, query.as_ref())?;
         timer.lap(&mut self.profile, KIND, Phase::Forward);
-        let init = self.init_at(query.as_ref())?;
         let v = self.data.template.vertex_count();
         let b = frames.len();
-        let (cross, init_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref())?;
-        timer.lap(&mut self.profile, KIND, Phase::Regularisers);
         let skinning = self.frame_skinning(&frames)?;
         let rest = self.rest_at(query.as_ref())?;
-        let offset =
-            (lbs(&w, &skinning, &rest)? - self.initial_posing(&init, &skinning, &rest, b)?)?;
+        // The target: the initial weights, or with teachers their mean in these poses.
+        let (cross, init_entropy, target_posed) = if self.is_distilling() {
+            let target = self.teacher_mean(&frames, query.as_ref())?;
+            let cross = (crate::losses::prior::cross_entropy(&w, &target)? / ((b * v) as f64))?;
+            let neg_entropy = super::ensemble::neg_entropy_sum(&target)? / (b * v).max(1) as f64;
+            (cross, neg_entropy, lbs(&target, &skinning, &rest)?)
+        } else {
+            let init = self.init_at(query.as_ref())?;
+            let (cross, neg_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref())?;
+            let posed = self.initial_posing(&init, &skinning, &rest, b)?;
+            (cross, neg_entropy, posed)
+        };
+        timer.lap(&mut self.profile, KIND, Phase::Regularisers);
+        let offset = (lbs(&w, &skinning, &rest)? - target_posed)?;
         let position =
             (offset.sqr()?.sum_all()? / ((b * v) as f64 * self.diagonal * self.diagonal))?;
         let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;

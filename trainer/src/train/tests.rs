@@ -1188,3 +1188,110 @@ fn pose_refinement_recovers_perturbed_training_poses_from_the_silhouettes() {
     };
     assert!(run(&perturbed, &off).is_none());
 }
+
+/// `KL(p ‖ q)` per row of two dense weight lists of `j` joints (zero targets add nothing).
+fn kl_per_row(p: &[f32], q: &[f32], j: usize) -> f64 {
+    let total: f64 = p
+        .iter()
+        .zip(q)
+        .filter(|(p, _)| **p > 0.0)
+        .map(|(p, q)| f64::from(*p) * (f64::from(*p) / f64::from(q.max(1e-30))).ln())
+        .sum();
+    total / (p.len() / j) as f64
+}
+
+#[test]
+fn a_frozen_net_keeps_its_parameters_while_its_trainer_goes_on() {
+    let (data, _) = scene(3);
+    let mut t = Trainer::new(data, config(), false).unwrap();
+    t.run(&tempfile::tempdir().unwrap().path().join("a"), false)
+        .unwrap();
+    let frozen = t.frozen_net().unwrap();
+    let (rows, mask) = t.net_rows(None).unwrap();
+    let poses = t.pose_tensor(&[0, 1]).unwrap();
+    let before = outputs(&t);
+    let of_frozen = |f: &TrainableSkinNet| -> Vec<f32> {
+        f.forward_masked(&rows, &poses, mask.as_ref())
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap()
+    };
+    assert_eq!(of_frozen(&frozen), before);
+    for _ in 0..3 {
+        t.step().unwrap();
+    }
+    assert_ne!(outputs(&t), before, "the trainer's own network moved");
+    assert_eq!(of_frozen(&frozen), before, "the frozen copy did not");
+}
+
+#[test]
+fn distillation_starts_at_the_first_member_and_regresses_the_members_mean() {
+    let (data, _) = scene(3);
+    let j = data.skeleton.len();
+    // Two networks of different seeds, far enough from uniform to differ (ensemble members
+    // differ by what their image iterations did; any two distinct networks will do here).
+    let member = |seed: u64| {
+        Trainer::new(
+            data.clone(),
+            TrainConfig {
+                seed,
+                output_init_scale: 3.0,
+                ..config()
+            },
+            false,
+        )
+        .unwrap()
+    };
+    let (a, b) = (member(1), member(2));
+    let (wa, wb) = (outputs(&a), outputs(&b));
+    let mean: Vec<f32> = wa.iter().zip(&wb).map(|(x, y)| 0.5 * (x + y)).collect();
+    let start = kl_per_row(&mean, &wa, j);
+    assert!(start > 1e-3, "the members hardly differ: KL {start}");
+
+    let mut student = Trainer::new(
+        data,
+        TrainConfig {
+            iterations: 0,
+            warm_start_iterations: 150,
+            adam: crate::optim::AdamConfig {
+                lr: 1e-2,
+                ..Default::default()
+            },
+            ensemble: super::ensemble::EnsembleConfig {
+                members: 2,
+                kl_tolerance: 0.0,
+            },
+            ..config()
+        },
+        false,
+    )
+    .unwrap();
+    student
+        .distil_from(vec![a.frozen_net().unwrap(), b.frozen_net().unwrap()])
+        .unwrap();
+    assert!(student.is_distilling());
+    assert_eq!(
+        outputs(&student),
+        wa,
+        "the student starts as the first member"
+    );
+    // The first step reports the KL of the weights before it: that of the first member, from
+    // the mean, in the step's own poses (`kl_per_row` is over frames 0 and 1).
+    let first = student.warm_step().unwrap().kl;
+    assert!(
+        first > 0.2 * start && first < 5.0 * start,
+        "{first} vs {start}"
+    );
+    for _ in 1..150 {
+        student.warm_step().unwrap();
+    }
+    let end = kl_per_row(&mean, &outputs(&student), j);
+    assert!(end < 0.2 * start, "KL from the mean {start} → {end}");
+    let to_a = kl_per_row(&wa, &outputs(&student), j);
+    assert!(
+        end < to_a,
+        "nearer the mean ({end}) than the first member ({to_a})"
+    );
+}

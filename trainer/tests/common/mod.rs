@@ -14,3 +14,25 @@ pub fn trainer(args: &[&str]) -> (i32, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// `trainer synth` of a small built-in capture into `out` (`train_frames` training frames, one
+/// test frame), plus `extra`.
+// Each test crate compiles this module on its own; not every one synthesises.
+#[allow(dead_code)]
+pub fn tiny_synth(out: &str, train_frames: &str, extra: &[&str]) -> (i32, String, String) {
+    let mut args = vec![
+        "synth",
+        "--out",
+        out,
+        "--grid",
+        "40",
+        "--vertices",
+        "2500",
+        "--train-frames",
+        train_frames,
+        "--test-frames",
+        "1",
+    ];
+    args.extend_from_slice(extra);
+    trainer(&args)
+}
