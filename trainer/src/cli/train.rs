@@ -347,7 +347,6 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
 /// image losses then start from weights that differ from the initial ones).
 fn report_warm_start(trainer: &Trainer) {
     let w = trainer.warm_status();
-    let c = trainer.config();
     if w.iterations == 0 {
         return;
     }
@@ -378,7 +377,7 @@ fn report_warm_start(trainer: &Trainer) {
             w.kl,
             trainer.warm_kl_tolerance(),
             w.position_relative,
-            c.warm_start_position_tolerance
+            trainer.warm_position_tolerance()
         );
     }
 }

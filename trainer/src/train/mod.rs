@@ -387,7 +387,7 @@ impl Trainer {
         let s = self.warm_status();
         self.warm_converged = self.warm_window.len() as u64 == self.config.warm_start_window
             && s.kl <= self.warm_kl_tolerance()
-            && s.position_relative <= self.config.warm_start_position_tolerance;
+            && s.position_relative <= self.warm_position_tolerance();
     }
 
     /// The warm start's KL tolerance: [`TrainConfig::warm_start_kl_tolerance`], or while
@@ -401,6 +401,17 @@ impl Trainer {
         }
     }
 
+    /// The warm start's position tolerance: [`TrainConfig::warm_start_position_tolerance`], or
+    /// while distilling [`ensemble::EnsembleConfig::position_tolerance`].
+    #[must_use]
+    pub fn warm_position_tolerance(&self) -> f64 {
+        if self.is_distilling() {
+            self.config.ensemble.position_tolerance
+        } else {
+            self.config.warm_start_position_tolerance
+        }
+    }
+
     /// Adam's settings: the configured ones, with [`TrainConfig::static_lr`] for the static
     /// baseline's logits.
     fn adam_config(config: &TrainConfig, static_weights: bool) -> crate::optim::AdamConfig {
@@ -411,14 +422,19 @@ impl Trainer {
         adam
     }
 
-    /// The learning rate of warm-start iteration `done` (0-based): `adam.lr` halved every
-    /// `warm_start_lr_halving` iterations.
+    /// The learning rate of warm-start iteration `done` (0-based): `adam.lr` (while distilling
+    /// `ensemble.lr`) halved every `warm_start_lr_halving` iterations.
     fn warm_lr(&self, done: u64) -> f64 {
         let halvings = done
             .checked_div(self.config.warm_start_lr_halving)
             .unwrap_or(0)
             .min(64);
-        self.config.adam.lr * 0.5f64.powi(halvings as i32)
+        let base = if self.is_distilling() {
+            self.config.ensemble.lr
+        } else {
+            self.config.adam.lr
+        };
+        base * 0.5f64.powi(halvings as i32)
     }
 
     /// The learning rate of image iteration `done` (0-based). Stage 1: a linear ramp over

@@ -54,7 +54,12 @@ impl Trainer {
         let offset = (lbs(&w, &skinning, &rest)? - target_posed)?;
         let position =
             (offset.sqr()?.sum_all()? / ((b * v) as f64 * self.diagonal * self.diagonal))?;
-        let total = (&cross + (&position * self.config.warm_start_position_weight)?)?;
+        let position_weight = if self.is_distilling() {
+            self.config.ensemble.position_weight
+        } else {
+            self.config.warm_start_position_weight
+        };
+        let total = (&cross + (&position * position_weight)?)?;
         let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
         let position_relative = f64::from(position.to_vec0::<f32>()?).max(0.0).sqrt();
         timer.lap(&mut self.profile, KIND, Phase::Skinning);

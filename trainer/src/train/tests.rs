@@ -1255,13 +1255,11 @@ fn distillation_starts_at_the_first_member_and_regresses_the_members_mean() {
         TrainConfig {
             iterations: 0,
             warm_start_iterations: 150,
-            adam: crate::optim::AdamConfig {
-                lr: 1e-2,
-                ..Default::default()
-            },
             ensemble: super::ensemble::EnsembleConfig {
                 members: 2,
                 kl_tolerance: 0.0,
+                lr: 1e-2,
+                ..Default::default()
             },
             ..config()
         },
