@@ -122,21 +122,7 @@ fn train_refine_poses_writes_the_corrected_training_motion() {
     )
     .unwrap();
     // `trainer train` into `out` with the configuration above, plus `extra`.
-    let train = |out: &str, extra: &[&str]| {
-        let mut args = vec![
-            "train",
-            "--capture",
-            c,
-            "--out",
-            out,
-            "--config",
-            config.to_str().unwrap(),
-            "--allow-worse",
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        trainer(&args)
-    };
+    let train = |out: &str, extra: &[&str]| common::train(c, out, config.to_str().unwrap(), extra);
     let model = tmp.path().join("m.skf");
     let (code, out, err) = train(model.to_str().unwrap(), &["--refine-poses"]);
     assert_eq!(code, 0, "{err}");

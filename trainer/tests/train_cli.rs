@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{tiny_synth, trainer};
+use common::tiny_synth;
 
 #[test]
 fn an_ensemble_trains_its_members_then_distils_one_model() {
@@ -21,21 +21,8 @@ fn an_ensemble_trains_its_members_then_distils_one_model() {
     )
     .unwrap();
     let model = tmp.path().join("m.skf");
-    let train = |extra: &[&str]| {
-        let mut args = vec![
-            "train",
-            "--capture",
-            c,
-            "--out",
-            model.to_str().unwrap(),
-            "--config",
-            config.to_str().unwrap(),
-            "--allow-worse",
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        trainer(&args)
-    };
+    let train =
+        |extra: &[&str]| common::train(c, model.to_str().unwrap(), config.to_str().unwrap(), extra);
     let (code, out, err) = train(&[]);
     assert_eq!(code, 0, "{err}");
     let work = tmp.path().join("m.skf.work");

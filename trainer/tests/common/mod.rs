@@ -36,3 +36,24 @@ pub fn tiny_synth(out: &str, train_frames: &str, extra: &[&str]) -> (i32, String
     args.extend_from_slice(extra);
     trainer(&args)
 }
+
+/// `trainer train` of `capture` into `out` with the configuration file `config`, writing the
+/// model even when the guard would refuse it (these captures are too small to learn), plus
+/// `extra`.
+// Each test crate compiles this module on its own; not every one trains.
+#[allow(dead_code)]
+pub fn train(capture: &str, out: &str, config: &str, extra: &[&str]) -> (i32, String, String) {
+    let mut args = vec![
+        "train",
+        "--capture",
+        capture,
+        "--out",
+        out,
+        "--config",
+        config,
+        "--allow-worse",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    trainer(&args)
+}
