@@ -1,5 +1,5 @@
-//! Checkpoints: every parameter, Adam's moments, the parameter average and the counters in one
-//! safetensors file, written atomically, and restored bit for bit on resume.
+//! Checkpoints: every parameter, Adam's moments, the parameter average, the best-validated average and
+//! the counters in one safetensors file, written atomically, and restored bit for bit on resume.
 
 use super::*;
 
@@ -46,6 +46,30 @@ impl Trainer {
             format!("{prefix}progress"),
             Tensor::new(p.as_slice(), &Device::Cpu)?,
         );
+        // The best-validated average is what a finished run exports: without it a run resumed
+        // after its last iteration would export the last average instead.
+        if let Some((score, iteration, params)) = &self.best {
+            for (name, t) in params {
+                tensors.insert(format!("{prefix}best.param.{name}"), t.clone());
+            }
+            tensors.insert(
+                format!("{prefix}best.score"),
+                Tensor::new(
+                    &[
+                        score.boundary_px,
+                        score.contour_px,
+                        score.silhouette_px,
+                        score.iou,
+                    ],
+                    &Device::Cpu,
+                )?,
+            );
+            let meta = [*iteration, score.views as u64].map(split_u64).concat();
+            tensors.insert(
+                format!("{prefix}best.meta"),
+                Tensor::new(meta.as_slice(), &Device::Cpu)?,
+            );
+        }
         Ok(tensors)
     }
 
@@ -86,9 +110,45 @@ impl Trainer {
         if let Some(r) = &mut self.pose_refinement {
             r.load_state_tensors(&state).map_err(&bad)?;
         }
-        let p = read_u64s(tensors, &format!("{prefix}progress"), 2).map_err(bad)?;
+        let p = read_u64s(tensors, &format!("{prefix}progress"), 2).map_err(&bad)?;
         self.warm_done = p[0];
         self.done = p[1];
+        self.best = match tensors.get(&format!("{prefix}best.score")) {
+            None => None,
+            Some(score) => {
+                let s = score
+                    .to_vec1::<f64>()
+                    .map_err(|e| bad(format!("`{prefix}best.score`: {e}")))?;
+                let [boundary_px, contour_px, silhouette_px, iou] = s[..] else {
+                    return Err(bad(format!(
+                        "`{prefix}best.score` has {} values, expected 4",
+                        s.len()
+                    )));
+                };
+                let meta = read_u64s(tensors, &format!("{prefix}best.meta"), 2).map_err(&bad)?;
+                let param_prefix = format!("{prefix}best.param.");
+                let mut params: NamedTensors = tensors
+                    .iter()
+                    .filter_map(|(k, v)| {
+                        Some((k.strip_prefix(&param_prefix)?.to_string(), v.clone()))
+                    })
+                    .collect();
+                params.sort_by(|a, b| a.0.cmp(&b.0));
+                let views = usize::try_from(meta[1])
+                    .map_err(|_| bad(format!("`{prefix}best.meta`: {} views", meta[1])))?;
+                Some((
+                    validation::ValidationScore {
+                        boundary_px,
+                        contour_px,
+                        silhouette_px,
+                        iou,
+                        views,
+                    },
+                    meta[0],
+                    params,
+                ))
+            }
+        };
         let window = tensors
             .get(&format!("{prefix}warm.window"))
             .ok_or_else(|| bad(format!("`{prefix}warm.window` is missing")))?

@@ -1293,3 +1293,29 @@ fn distillation_starts_at_the_first_member_and_regresses_the_members_mean() {
         "nearer the mean ({end}) than the first member ({to_a})"
     );
 }
+
+#[test]
+fn a_resumed_run_exports_the_best_validated_average_it_had_found() {
+    let (data, _) = scene(8);
+    let cfg = TrainConfig {
+        iterations: 6,
+        validation_frames: 2,
+        validation_every: 2,
+        ..config()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut a = Trainer::new(data.clone(), cfg.clone(), false).unwrap();
+    a.run(&dir.path().join("a"), false).unwrap();
+    let best = a.best_validation();
+    assert!(best.is_some());
+    // A fresh process resumes the finished run: nothing is left to train, and it must export
+    // what the uninterrupted one does, the best average rather than the last.
+    let mut b = Trainer::new(data, cfg, false).unwrap();
+    b.resume(&dir.path().join("a/checkpoint.safetensors"))
+        .unwrap();
+    b.run(&dir.path().join("a"), false).unwrap();
+    assert_eq!(b.best_validation(), best);
+    a.adopt_average().unwrap();
+    b.adopt_average().unwrap();
+    assert_eq!(outputs(&b), outputs(&a));
+}
