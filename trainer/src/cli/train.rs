@@ -375,9 +375,9 @@ fn report_warm_start(trainer: &Trainer) {
              `warm_start_iterations` in the training configuration.",
             w.iterations,
             w.kl,
-            trainer.warm_kl_tolerance(),
+            trainer.warm_settings().kl_tolerance,
             w.position_relative,
-            trainer.warm_position_tolerance()
+            trainer.warm_settings().position_tolerance
         );
     }
 }

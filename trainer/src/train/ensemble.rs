@@ -190,10 +190,3 @@ impl Trainer {
         Ok((sum / self.teachers.len() as f64)?)
     }
 }
-
-/// `Σ t ln t` over a dense weight tensor (zero weights add nothing): the constant that turns
-/// the cross-entropy against target `t` into a KL divergence.
-pub(super) fn neg_entropy_sum(t: &Tensor) -> Result<f64, TrainError> {
-    let ln = t.clamp(1e-30, 1.0)?.log()?;
-    Ok(f64::from((t * ln)?.sum_all()?.to_vec0::<f32>()?))
-}

@@ -140,6 +140,20 @@ pub struct Trainer {
     teachers: Vec<TrainableSkinNet>,
 }
 
+/// The settings of the warm-start loop ([`Trainer::warm_settings`]): the warm start's own, or
+/// the distillation's when it regresses an ensemble's mean instead of the initial weights.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WarmSettings {
+    /// Learning rate before the halvings (`warm_start_lr_halving`).
+    pub lr: f64,
+    /// Converged when the window's mean KL per vertex (nats) is at most this…
+    pub kl_tolerance: f64,
+    /// …and its RMS posed-position error is at most this fraction of the diagonal.
+    pub position_tolerance: f64,
+    /// Weight of the posed-position term in the objective.
+    pub position_weight: f64,
+}
+
 /// Copies of parameters by name.
 type NamedTensors = Vec<(String, Tensor)>;
 
@@ -385,30 +399,32 @@ impl Trainer {
             self.warm_window.pop_front();
         }
         let s = self.warm_status();
+        let settings = self.warm_settings();
         self.warm_converged = self.warm_window.len() as u64 == self.config.warm_start_window
-            && s.kl <= self.warm_kl_tolerance()
-            && s.position_relative <= self.warm_position_tolerance();
+            && s.kl <= settings.kl_tolerance
+            && s.position_relative <= settings.position_tolerance;
     }
 
-    /// The warm start's KL tolerance: [`TrainConfig::warm_start_kl_tolerance`], or while
-    /// distilling [`ensemble::EnsembleConfig::kl_tolerance`].
+    /// What the warm-start loop runs with: the warm start's settings, or while distilling
+    /// ([`Trainer::distil_from`]) the ensemble's.
     #[must_use]
-    pub fn warm_kl_tolerance(&self) -> f64 {
+    pub fn warm_settings(&self) -> WarmSettings {
+        let c = &self.config;
         if self.is_distilling() {
-            self.config.ensemble.kl_tolerance
+            let e = &c.ensemble;
+            WarmSettings {
+                lr: e.lr,
+                kl_tolerance: e.kl_tolerance,
+                position_tolerance: e.position_tolerance,
+                position_weight: e.position_weight,
+            }
         } else {
-            self.config.warm_start_kl_tolerance
-        }
-    }
-
-    /// The warm start's position tolerance: [`TrainConfig::warm_start_position_tolerance`], or
-    /// while distilling [`ensemble::EnsembleConfig::position_tolerance`].
-    #[must_use]
-    pub fn warm_position_tolerance(&self) -> f64 {
-        if self.is_distilling() {
-            self.config.ensemble.position_tolerance
-        } else {
-            self.config.warm_start_position_tolerance
+            WarmSettings {
+                lr: c.adam.lr,
+                kl_tolerance: c.warm_start_kl_tolerance,
+                position_tolerance: c.warm_start_position_tolerance,
+                position_weight: c.warm_start_position_weight,
+            }
         }
     }
 
@@ -429,12 +445,7 @@ impl Trainer {
             .checked_div(self.config.warm_start_lr_halving)
             .unwrap_or(0)
             .min(64);
-        let base = if self.is_distilling() {
-            self.config.ensemble.lr
-        } else {
-            self.config.adam.lr
-        };
-        base * 0.5f64.powi(halvings as i32)
+        self.warm_settings().lr * 0.5f64.powi(halvings as i32)
     }
 
     /// The learning rate of image iteration `done` (0-based). Stage 1: a linear ramp over

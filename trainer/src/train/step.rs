@@ -42,7 +42,8 @@ impl Trainer {
         let (cross, init_entropy, target_posed) = if self.is_distilling() {
             let target = self.teacher_mean(&frames, query.as_ref())?;
             let cross = (crate::losses::prior::cross_entropy(&w, &target)? / ((b * v) as f64))?;
-            let neg_entropy = super::ensemble::neg_entropy_sum(&target)? / (b * v).max(1) as f64;
+            let neg_entropy = crate::losses::prior::neg_entropy(&target.flatten_all()?.to_vec1()?)
+                / (b * v).max(1) as f64;
             (cross, neg_entropy, lbs(&target, &skinning, &rest)?)
         } else {
             let init = self.init_at(query.as_ref())?;
@@ -54,12 +55,7 @@ impl Trainer {
         let offset = (lbs(&w, &skinning, &rest)? - target_posed)?;
         let position =
             (offset.sqr()?.sum_all()? / ((b * v) as f64 * self.diagonal * self.diagonal))?;
-        let position_weight = if self.is_distilling() {
-            self.config.ensemble.position_weight
-        } else {
-            self.config.warm_start_position_weight
-        };
-        let total = (&cross + (&position * position_weight)?)?;
+        let total = (&cross + (&position * self.warm_settings().position_weight)?)?;
         let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
         let position_relative = f64::from(position.to_vec0::<f32>()?).max(0.0).sqrt();
         timer.lap(&mut self.profile, KIND, Phase::Skinning);
