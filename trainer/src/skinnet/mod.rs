@@ -188,6 +188,10 @@ impl TrainableSkinNet {
 
     /// [`TrainableSkinNet::forward`] with the softmax restricted to candidate joints: `mask` is `[V, J]`,
     /// 0 where joint `j` is a candidate of vertex `v` and −∞ elsewhere ([`crate::candidates`]).
+    ///
+    /// `poses` is either `[F, 3J]` (one pose per frame, shared by every vertex) or `[F, V, 3J]`
+    /// (a pose per row: what the training step's pose-locality augmentation feeds,
+    /// [`crate::train::TrainConfig::pose_locality`]).
     pub fn forward_masked(
         &self,
         positions: &Tensor,
@@ -195,7 +199,16 @@ impl TrainableSkinNet {
         mask: Option<&Tensor>,
     ) -> Result<Tensor> {
         let (v, p) = positions.dims2()?;
-        let (f, q) = poses.dims2()?;
+        let (f, q, per_row) = match *poses.dims() {
+            [f, q] => (f, q, false),
+            [f, rows, q] if rows == v => (f, q, true),
+            _ => candle_core::bail!(
+                "SkinNet pose features {:?}, expected [F, {}] or [F, {v}, {}]",
+                poses.dims(),
+                self.config.pose_width(),
+                self.config.pose_width()
+            ),
+        };
         if p != self.config.position_width() || q != self.config.pose_width() {
             candle_core::bail!(
                 "SkinNet input widths {p} + {q}, expected {} + {}",
@@ -223,15 +236,23 @@ impl TrainableSkinNet {
         };
         let n = self.layers.len() - 1;
         let skip = self.config.skip_layer as usize;
-        // Position part [V, out] + (pose part + bias) [F, out], broadcast to [F·V, out].
+        // Position part [V, out] + (pose part + bias) [F, out] (or [F, V, out] with a pose per
+        // row), broadcast to [F·V, out].
         let split = |w: &Tensor, b: &Tensor, at: usize| -> Result<Tensor> {
             let wp = w.narrow(1, at, p)?;
             let wq = w.narrow(1, at + p, q)?;
             let a = positions.matmul(&wp.t()?)?;
-            let c = poses.matmul(&wq.t()?)?.broadcast_add(b)?;
-            a.unsqueeze(0)?
-                .broadcast_add(&c.unsqueeze(1)?)?
-                .reshape((f * v, w.dim(0)?))
+            let out = w.dim(0)?;
+            let c = if per_row {
+                poses
+                    .reshape((f * v, q))?
+                    .matmul(&wq.t()?)?
+                    .broadcast_add(b)?
+                    .reshape((f, v, out))?
+            } else {
+                poses.matmul(&wq.t()?)?.broadcast_add(b)?.unsqueeze(1)?
+            };
+            a.unsqueeze(0)?.broadcast_add(&c)?.reshape((f * v, out))
         };
         let mut h: Option<Tensor> = None;
         for (i, layer) in self.layers.iter().enumerate() {

@@ -161,7 +161,8 @@ impl FusedContext {
     }
 }
 
-/// The custom op: `(params [P], positions [V, Pw], poses [F, Qw]) → weights [F, V, J]`, with an
+/// The custom op: `(params [P], positions [V, Pw], poses [F, Qw] or [F, V, Qw]) → weights
+/// [F, V, J]`, with an
 /// optional additive mask `[V, J]` (0 on candidate joints, −∞ elsewhere) applied to the logits.
 struct FusedSkinNet {
     context: Arc<FusedContext>,
@@ -181,6 +182,16 @@ impl Drop for FusedSkinNet {
         if let Some(acts) = saved {
             self.context.pool.give(acts.into_buffers());
         }
+    }
+}
+
+/// `(frames, pose width, per row)` of the pose input: `[F, Q]` (a pose per frame) or
+/// `[F, V, Q]` (a pose per row).
+fn pose_shape(shape: &Shape, vertices: usize) -> Result<(usize, usize, bool)> {
+    match *shape.dims() {
+        [f, q] => Ok((f, q, false)),
+        [f, rows, q] if rows == vertices => Ok((f, q, true)),
+        _ => bail!("fused SkinNet: poses {shape:?} are neither [F, Q] nor [F, {vertices}, Q]"),
     }
 }
 
@@ -214,7 +225,7 @@ impl CustomOp3 for FusedSkinNet {
         let positions = f32_data(s2, l2, "positions")?;
         let poses = f32_data(s3, l3, "poses")?;
         let (v, p) = l2.shape().dims2()?;
-        let (f, q) = l3.shape().dims2()?;
+        let (f, q, per_row) = pose_shape(l3.shape(), v)?;
         if params.len() != ctx.layout.len()
             || p != ctx.config.position_width()
             || q != ctx.config.pose_width()
@@ -234,6 +245,7 @@ impl CustomOp3 for FusedSkinNet {
         {
             bail!("fused SkinNet: the mask is not [V, J]");
         }
+        let poses = pass::Poses::new(poses, per_row);
         let acts = pass::forward(ctx, params, positions, poses, self.mask.as_deref(), f, v)?;
         let weights = acts.output().to_vec();
         *self
@@ -259,29 +271,28 @@ impl CustomOp3 for FusedSkinNet {
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .take();
         let params_v = params.flatten_all()?.to_vec1::<f32>()?;
+        let positions_v = positions.flatten_all()?.to_vec1::<f32>()?;
+        let poses_v = poses.flatten_all()?.to_vec1::<f32>()?;
+        let (v, _) = positions.dims2()?;
+        let (f, _, per_row) = pose_shape(poses.shape(), v)?;
+        let poses_p = pass::Poses::new(&poses_v, per_row);
         let acts = match taken {
             Some(a) => a,
-            None => {
-                let (v, _) = positions.dims2()?;
-                let (f, _) = poses.dims2()?;
-                pass::forward(
-                    ctx,
-                    &params_v,
-                    &positions.flatten_all()?.to_vec1::<f32>()?,
-                    &poses.flatten_all()?.to_vec1::<f32>()?,
-                    self.mask.as_deref(),
-                    f,
-                    v,
-                )?
-            }
+            None => pass::forward(
+                ctx,
+                &params_v,
+                &positions_v,
+                poses_p,
+                self.mask.as_deref(),
+                f,
+                v,
+            )?,
         };
         let grad = grad_res
             .to_dtype(candle_core::DType::F32)?
             .flatten_all()?
             .to_vec1::<f32>()?;
-        let positions_v = positions.flatten_all()?.to_vec1::<f32>()?;
-        let poses_v = poses.flatten_all()?.to_vec1::<f32>()?;
-        let dparams = pass::backward(ctx, &params_v, &positions_v, &poses_v, acts, &grad)?;
+        let dparams = pass::backward(ctx, &params_v, &positions_v, poses_p, acts, &grad)?;
         let n = dparams.len();
         Ok((
             Some(Tensor::from_vec(dparams, n, params.device())?),
@@ -292,7 +303,8 @@ impl CustomOp3 for FusedSkinNet {
 }
 
 /// SkinNet's weights `[F, V, J]` by the fused op: `params` is the flat parameter vector in
-/// [`ParamLayout`] order (differentiable), `positions` `[V, P]` and `poses` `[F, Q]` constants,
+/// [`ParamLayout`] order (differentiable), `positions` `[V, P]` and `poses` `[F, Q]` (or
+/// `[F, V, Q]`, a pose per row) constants,
 /// `mask` an optional additive `[V, J]` mask of the logits (0 or −∞).
 pub(crate) fn forward(
     context: &Arc<FusedContext>,

@@ -32,6 +32,20 @@ fn flush(x: &mut [f32], tau: f32) {
     }
 }
 
+/// The pose input: one pose per frame (`[F, Q]`, broadcast over the frame's vertices) or one
+/// per row (`[F·V, Q]`, the pose-locality augmentation of the training step).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Poses<'a> {
+    data: &'a [f32],
+    per_row: bool,
+}
+
+impl<'a> Poses<'a> {
+    pub(crate) fn new(data: &'a [f32], per_row: bool) -> Self {
+        Self { data, per_row }
+    }
+}
+
 /// What the forward pass keeps for the backward pass.
 #[derive(Debug)]
 pub(crate) struct Activations {
@@ -96,7 +110,8 @@ fn hidden_input(ctx: &FusedContext, i: usize) -> usize {
 
 /// Fills `z` (rows × out) with `b` plus the layer's input parts: for a layer that reads the
 /// network input, the per-vertex product `positions·W_posᵀ` and the per-frame product
-/// `poses·W_poseᵀ`, each computed once and broadcast over the rows.
+/// `poses·W_poseᵀ`, each computed once and broadcast over the rows (with a pose per row, that
+/// product is one per row instead).
 #[allow(clippy::too_many_arguments)]
 fn init_rows(
     ctx: &FusedContext,
@@ -105,7 +120,7 @@ fn init_rows(
     w: &[f32],
     bias: &[f32],
     positions: &[f32],
-    poses: &[f32],
+    poses: Poses<'_>,
     frames: usize,
     vertices: usize,
     threads: usize,
@@ -130,10 +145,31 @@ fn init_rows(
         false,
         threads,
     );
+    if poses.per_row {
+        let rows = frames * vertices;
+        z.par_chunks_mut(vertices * out).for_each(|frame_rows| {
+            for (row, a) in frame_rows
+                .chunks_exact_mut(out)
+                .zip(per_vertex.chunks_exact(out))
+            {
+                for ((z, a), b) in row.iter_mut().zip(a).zip(bias) {
+                    *z = a + b;
+                }
+            }
+        });
+        matmul(
+            MatMut::row_major(z, rows, out),
+            MatRef::row_major(poses.data, rows, qw),
+            wm.columns(prev + pw, qw).t(),
+            true,
+            threads,
+        );
+        return;
+    }
     let mut per_frame: Vec<f32> = (0..frames).flat_map(|_| bias.iter().copied()).collect();
     matmul(
         MatMut::row_major(&mut per_frame, frames, out),
-        MatRef::row_major(poses, frames, qw),
+        MatRef::row_major(poses.data, frames, qw),
         wm.columns(prev + pw, qw).t(),
         true,
         1,
@@ -175,7 +211,7 @@ pub(crate) fn forward(
     ctx: &FusedContext,
     params: &[f32],
     positions: &[f32],
-    poses: &[f32],
+    poses: Poses<'_>,
     mask: Option<&[f32]>,
     frames: usize,
     vertices: usize,
@@ -315,7 +351,7 @@ pub(crate) fn backward(
     ctx: &FusedContext,
     params: &[f32],
     positions: &[f32],
-    poses: &[f32],
+    poses: Poses<'_>,
     acts: Activations,
     grad: &[f32],
 ) -> Result<Vec<f32>> {
@@ -379,13 +415,23 @@ pub(crate) fn backward(
                 false,
                 threads,
             );
-            matmul(
-                MatMut::row_major(&mut dw, out, inp).columns(prev + pw, qw),
-                MatRef::row_major(&per_frame, frames, out).t(),
-                MatRef::row_major(poses, frames, qw),
-                false,
-                1,
-            );
+            if poses.per_row {
+                matmul(
+                    MatMut::row_major(&mut dw, out, inp).columns(prev + pw, qw),
+                    dzm.t(),
+                    MatRef::row_major(poses.data, rows, qw),
+                    false,
+                    threads,
+                );
+            } else {
+                matmul(
+                    MatMut::row_major(&mut dw, out, inp).columns(prev + pw, qw),
+                    MatRef::row_major(&per_frame, frames, out).t(),
+                    MatRef::row_major(poses.data, frames, qw),
+                    false,
+                    1,
+                );
+            }
             for row in per_frame.chunks_exact(out) {
                 for (b, d) in db.iter_mut().zip(row) {
                     *b += d;

@@ -70,10 +70,11 @@ fn check_against_candle(
     points: usize,
     seed: u64,
 ) {
-    check_masked(config, vars, frames, points, seed, None);
+    check_masked(config, vars, frames, points, seed, None, false);
 }
 
-/// [`check_against_candle`] with an optional additive mask `[points, J]` on the logits.
+/// [`check_against_candle`] with an optional additive mask `[points, J]` on the logits, and a
+/// pose per frame (`[F, Q]`) or, with `per_row`, a different pose per row (`[F, V, Q]`).
 fn check_masked(
     config: ModelConfig,
     vars: &VarMap,
@@ -81,12 +82,21 @@ fn check_masked(
     points: usize,
     seed: u64,
     mask: Option<&Tensor>,
+    per_row: bool,
 ) {
     let dev = Device::Cpu;
     let enc = position_inputs_tensor(&config, &random_points(points, seed), &dev).unwrap();
     let q = config.pose_width();
-    let poses =
-        Tensor::from_vec(random_values(frames * q, 1.5, seed + 1), (frames, q), &dev).unwrap();
+    let poses = if per_row {
+        Tensor::from_vec(
+            random_values(frames * points * q, 1.5, seed + 1),
+            (frames, points, q),
+            &dev,
+        )
+    } else {
+        Tensor::from_vec(random_values(frames * q, 1.5, seed + 1), (frames, q), &dev)
+    }
+    .unwrap();
     let j = config.joint_count as usize;
     let target = Tensor::from_vec(
         random_values(frames * points * j, 1.0, seed + 2),
@@ -208,7 +218,109 @@ fn masked_gradients_equal_candle() {
         &Device::Cpu,
     )
     .unwrap();
-    check_masked(config, &seeded_vars(config, 33), 3, points, 8, Some(&mask));
+    check_masked(
+        config,
+        &seeded_vars(config, 33),
+        3,
+        points,
+        8,
+        Some(&mask),
+        false,
+    );
+    check_masked(
+        config,
+        &seeded_vars(config, 34),
+        2,
+        points,
+        9,
+        Some(&mask),
+        true,
+    );
+}
+
+#[test]
+fn a_pose_per_row_gives_the_gradients_of_candle() {
+    let paper = ModelConfig::paper_architecture(5, [-1.0; 3], [1.0; 3]);
+    let mut narrow = paper;
+    narrow.hidden_count = 3;
+    narrow.hidden = [0; skinfield_formats::skf::MAX_HIDDEN_LAYERS];
+    narrow.hidden[..3].copy_from_slice(&[24, 16, 20]);
+    narrow.skip_layer = 1;
+    narrow.pe_frequencies = 2;
+    for (k, config) in [paper, narrow].into_iter().enumerate() {
+        let vars = seeded_vars(config, 40 + k as u64);
+        check_masked(config, &vars, 3, 23, 50 + k as u64, None, true);
+    }
+}
+
+#[test]
+fn a_pose_per_row_that_repeats_the_frames_pose_gives_the_frames_weights() {
+    // Both backends: `[F, V, Q]` rows all equal to frame f's pose must give exactly what
+    // `[F, Q]` gives, values and gradients (up to summation order).
+    let config = ModelConfig::paper_architecture(6, [-1.0; 3], [1.0; 3]);
+    let dev = Device::Cpu;
+    let (frames, points) = (2, 31);
+    let enc = position_inputs_tensor(&config, &random_points(points, 61), &dev).unwrap();
+    let q = config.pose_width();
+    let poses = Tensor::from_vec(random_values(frames * q, 1.5, 62), (frames, q), &dev).unwrap();
+    let rows = poses
+        .unsqueeze(1)
+        .unwrap()
+        .broadcast_as((frames, points, q))
+        .unwrap()
+        .contiguous()
+        .unwrap();
+    let target = Tensor::from_vec(
+        random_values(frames * points * 6, 1.0, 63),
+        (frames, points, 6),
+        &dev,
+    )
+    .unwrap();
+    for backend in [Backend::Fused, Backend::Candle(Activation::Composite)] {
+        let (net, varmap) = TrainableSkinNet::seeded(config, 64, 1.0).unwrap();
+        let net = net.with_backend(backend);
+        let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let gradient = |w: &Tensor| {
+            let g = loss(w, &target).backward().unwrap();
+            let vars = varmap.data().lock().unwrap();
+            let mut names: Vec<_> = vars.keys().cloned().collect();
+            names.sort();
+            names
+                .iter()
+                .flat_map(|n| flat(g.get(vars[n].as_tensor()).unwrap()))
+                .collect::<Vec<f32>>()
+        };
+        let per_frame = net.forward(&enc, &poses).unwrap();
+        let per_row = net.forward(&enc, &rows).unwrap();
+        let close = |a: &[f32], b: &[f32], what: &str| {
+            let scale = b.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                assert!(
+                    (x - y).abs() <= 1e-5 * scale.max(1.0),
+                    "{backend:?} {what}[{i}]: per row {x} vs per frame {y}"
+                );
+            }
+        };
+        close(&flat(&per_row), &flat(&per_frame), "weights");
+        close(&gradient(&per_row), &gradient(&per_frame), "gradient");
+    }
+}
+
+#[test]
+fn a_pose_input_of_another_shape_is_an_error() {
+    let config = ModelConfig::paper_architecture(3, [-1.0; 3], [1.0; 3]);
+    let dev = Device::Cpu;
+    let enc = position_inputs_tensor(&config, &random_points(5, 1), &dev).unwrap();
+    let q = config.pose_width();
+    for backend in [Backend::Fused, Backend::Candle(Activation::Composite)] {
+        let net = TrainableSkinNet::seeded(config, 2, 1.0)
+            .unwrap()
+            .0
+            .with_backend(backend);
+        // Four rows per frame where the positions have five.
+        let wrong = Tensor::zeros((2, 4, q), DType::F32, &dev).unwrap();
+        assert!(net.forward(&enc, &wrong).is_err(), "{backend:?}");
+    }
 }
 
 #[test]
