@@ -25,6 +25,7 @@ pub mod data;
 pub mod ensemble;
 mod error;
 pub mod plot;
+pub mod pose_locality;
 pub mod pose_refinement;
 pub mod profile;
 pub mod queries;
@@ -163,6 +164,8 @@ const PHASE_WARM: u64 = 1;
 const PHASE_IMAGE: u64 = 2;
 /// Added to a phase for its query-point stream ([`queries`]).
 const PHASE_QUERY_OFFSET: u64 = 100;
+/// Added to a phase for its pose-locality donor stream ([`pose_locality`]).
+const PHASE_POSE_LOCALITY_OFFSET: u64 = 200;
 
 fn frame_rng(seed: u64, phase: u64, iteration: u64) -> ChaCha8Rng {
     // Distinct, reproducible streams per (seed, phase, iteration).
@@ -700,6 +703,48 @@ impl Trainer {
     /// full-resolution query points, or at the training vertices themselves (`None`).
     fn weights_at(&self, frames: &[usize], query: Option<&Tensor>) -> Result<Tensor, TrainError> {
         self.weights_for_poses(self.pose_rows(frames), frames.len(), query)
+    }
+
+    /// SkinNet's weights `[B, V, J]` for the current image iteration: [`Self::weights_at`], with
+    /// each row's pose input made local ([`pose_locality`]) when [`TrainConfig::pose_locality`]
+    /// is on and the run has candidate joints.
+    fn image_weights(
+        &self,
+        frames: &[usize],
+        query: Option<&Tensor>,
+    ) -> Result<Tensor, TrainError> {
+        if !self.config.pose_locality {
+            return self.weights_at(frames, query);
+        }
+        let Model::Net { net, .. } = &self.model else {
+            return self.weights_at(frames, query);
+        };
+        let (rows, Some(mask)) = self.net_rows(query)? else {
+            return self.weights_at(frames, query);
+        };
+        let j = self.data.skeleton.len();
+        let relevant: Vec<bool> = mask
+            .flatten_all()?
+            .to_vec1::<f32>()?
+            .iter()
+            .map(|&m| m == 0.0)
+            .collect();
+        let poses: Vec<&[f32]> = frames
+            .iter()
+            .map(|&f| &self.data.frames[f].pose_features[..])
+            .collect();
+        let pool: Vec<&[f32]> = self
+            .data
+            .frames
+            .iter()
+            .map(|f| &f.pose_features[..])
+            .collect();
+        let phase = PHASE_POSE_LOCALITY_OFFSET + PHASE_IMAGE;
+        let mut rng = frame_rng(self.config.seed, phase, self.done);
+        let v = relevant.len() / j.max(1);
+        let local = pose_locality::local_pose_rows(&poses, &pool, &relevant, j, &mut rng);
+        let local = Tensor::from_vec(local, (frames.len(), v, 3 * j), &Device::Cpu)?;
+        Ok(net.forward_masked(&rows, &local, Some(&mask))?)
     }
 
     /// The concatenated pose features of training frames `frames`.

@@ -100,7 +100,7 @@ impl Trainer {
         let mut timer = Timer::start();
         let frames = self.sample(PHASE_IMAGE, self.done);
         let query = self.draw_queries(PHASE_IMAGE, self.done)?;
-        let w = self.weights_at(&frames, query.as_ref())?;
+        let w = self.image_weights(&frames, query.as_ref())?;
         timer.lap(&mut self.profile, KIND, Phase::Forward);
         let b = frames.len();
         let skinning = self.frame_skinning(&frames)?;

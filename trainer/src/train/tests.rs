@@ -1319,3 +1319,91 @@ fn a_resumed_run_exports_the_best_validated_average_it_had_found() {
     b.adopt_average().unwrap();
     assert_eq!(outputs(&b), outputs(&a));
 }
+
+/// Mean absolute change of the weights of the vertices of `t` when, in training frame `f`, the
+/// pose features of every joint that is not one of the vertex's candidates are those of
+/// another training frame instead (over all ordered pairs of frames whose features differ
+/// there), and the vertex count it averaged over.
+fn non_candidate_sensitivity(t: &Trainer) -> f64 {
+    let lists = &t.candidates.as_ref().unwrap().lists;
+    let j = t.data.skeleton.len();
+    let frames: Vec<&[f32]> = t.data.frames.iter().map(|f| &f.pose_features[..]).collect();
+    let v = lists.len();
+    let (mut total, mut count) = (0.0f64, 0usize);
+    for (f, own) in frames.iter().enumerate() {
+        let base = t
+            .weights_for_poses(own.to_vec(), 1, None)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        for (g, other) in frames.iter().enumerate() {
+            if g == f {
+                continue;
+            }
+            // One forward per vertex would be slow; instead one pose per distinct list.
+            let mut by_list: HashMap<&[u16], Vec<usize>> = HashMap::new();
+            for (i, l) in lists.iter().enumerate() {
+                by_list.entry(&l[..]).or_default().push(i);
+            }
+            for (list, members) in by_list {
+                let mut mixed = other.to_vec();
+                for &c in list {
+                    let c = c as usize;
+                    mixed[3 * c..3 * c + 3].copy_from_slice(&own[3 * c..3 * c + 3]);
+                }
+                if mixed == own.to_vec() {
+                    continue;
+                }
+                let w = t
+                    .weights_for_poses(mixed, 1, None)
+                    .unwrap()
+                    .flatten_all()
+                    .unwrap()
+                    .to_vec1::<f32>()
+                    .unwrap();
+                for i in members {
+                    let d: f32 = (0..j).map(|k| (w[i * j + k] - base[i * j + k]).abs()).sum();
+                    total += f64::from(d);
+                    count += 1;
+                }
+            }
+        }
+    }
+    assert!(count > v, "no vertex has a non-candidate joint that moves");
+    total / count as f64
+}
+
+#[test]
+fn pose_locality_keeps_weights_from_following_joints_that_do_not_move_them() {
+    // A 12-joint finger whose training frames curl every joint: each ring's candidates are a
+    // few joints near it, and the network could read its weights off any joint's angle.
+    let data = finger_scene(12, 4);
+    let train = |pose_locality: bool| {
+        let cfg = TrainConfig {
+            warm_start_iterations: 20,
+            warm_start_kl_tolerance: 0.0,
+            iterations: 120,
+            batch: 2,
+            pose_locality,
+            adam: crate::optim::AdamConfig {
+                lr: 1e-2,
+                ..Default::default()
+            },
+            ..config()
+        };
+        let mut t = Trainer::new(data.clone(), cfg, false).unwrap();
+        t.run(&tempfile::tempdir().unwrap().path().join("f"), false)
+            .unwrap();
+        t
+    };
+    let free = non_candidate_sensitivity(&train(false));
+    let local = non_candidate_sensitivity(&train(true));
+    eprintln!("weight change from non-candidate joints: without {free:.2e}, with {local:.2e}");
+    assert!(
+        local < 0.5 * free,
+        "pose locality left the weights as sensitive to joints that do not move them \
+         ({local:.2e} against {free:.2e})"
+    );
+}
