@@ -174,10 +174,8 @@ fn seeded_vars(config: ModelConfig, seed: u64) -> VarMap {
     TrainableSkinNet::seeded(config, seed, 1.0).unwrap().1
 }
 
-#[test]
-fn gradients_equal_candle_on_random_nets() {
-    // The paper's architecture, a narrow net with the skip into the second layer, and a net
-    // without a skip layer.
+/// The paper's architecture for 5 joints, and a narrow net with the skip into the second layer.
+fn paper_and_narrow() -> (ModelConfig, ModelConfig) {
     let paper = ModelConfig::paper_architecture(5, [-1.0; 3], [1.0; 3]);
     let mut narrow = paper;
     narrow.hidden_count = 3;
@@ -185,6 +183,14 @@ fn gradients_equal_candle_on_random_nets() {
     narrow.hidden[..3].copy_from_slice(&[24, 16, 20]);
     narrow.skip_layer = 1;
     narrow.pe_frequencies = 2;
+    (paper, narrow)
+}
+
+#[test]
+fn gradients_equal_candle_on_random_nets() {
+    // The paper's architecture, a narrow net with the skip into the second layer, and a net
+    // without a skip layer.
+    let (paper, narrow) = paper_and_narrow();
     let mut no_skip = narrow;
     no_skip.skip_layer = 0;
     no_skip.joint_count = 3;
@@ -240,13 +246,7 @@ fn masked_gradients_equal_candle() {
 
 #[test]
 fn a_pose_per_row_gives_the_gradients_of_candle() {
-    let paper = ModelConfig::paper_architecture(5, [-1.0; 3], [1.0; 3]);
-    let mut narrow = paper;
-    narrow.hidden_count = 3;
-    narrow.hidden = [0; skinfield_formats::skf::MAX_HIDDEN_LAYERS];
-    narrow.hidden[..3].copy_from_slice(&[24, 16, 20]);
-    narrow.skip_layer = 1;
-    narrow.pe_frequencies = 2;
+    let (paper, narrow) = paper_and_narrow();
     for (k, config) in [paper, narrow].into_iter().enumerate() {
         let vars = seeded_vars(config, 40 + k as u64);
         check_masked(config, &vars, 3, 23, 50 + k as u64, None, true);
