@@ -6,6 +6,8 @@
 //! `cargo bench -p skinfield-benches --bench skinnet_step`: 4 frames × 2,500 rows, J = 24, the
 //! paper's architecture. Throughputs are printed by criterion as `elem/s`, where an element is
 //! one floating-point operation of the measured work, so `Gelem/s` reads as GFLOP/s.
+//! `fused_forward_backward_pose_per_row/2t` feeds the same poses per row (`[F, V, 3J]`, the
+//! input of pose locality's training step) against `fused_forward_backward/2t`.
 
 use candle_core::{Device, Tensor};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
@@ -42,6 +44,20 @@ fn forward_flops(config: &ModelConfig, frames: usize, vertices: usize) -> f64 {
                 2.0 * out * inp as f64 * rows
             }
         })
+        .sum()
+}
+
+/// The floating-point operations a pose per row ([F, V, Q], pose locality's training input)
+/// adds to [`forward_flops`]: the pose parts of the input layers per row instead of per frame.
+fn pose_per_row_extra_flops(config: &ModelConfig, frames: usize, vertices: usize) -> f64 {
+    let q = config.pose_width() as f64;
+    let skip = config.skip_layer as usize;
+    let extra_rows = (frames * vertices - frames) as f64;
+    config
+        .layer_shapes(Net::Skin)
+        .enumerate()
+        .filter(|&(i, _)| i == 0 || (i == skip && i > 0))
+        .map(|(_, (out, _))| 2.0 * out as f64 * q * extra_rows)
         .sum()
 }
 
@@ -161,6 +177,27 @@ fn mlp(c: &mut Criterion) {
             b.iter(|| pool.install(|| net.forward(&x.encoded, &x.poses).unwrap()));
         });
     }
+    // Pose locality's input: the same poses given per row, as the training step feeds them.
+    let q = x.config.pose_width();
+    let per_row = x
+        .poses
+        .unsqueeze(1)
+        .unwrap()
+        .broadcast_as((FRAMES, POINTS, q))
+        .unwrap()
+        .contiguous()
+        .unwrap();
+    let with_rows = forward + pose_per_row_extra_flops(&x.config, FRAMES, POINTS);
+    let pool2 = pool(2);
+    group.throughput(Throughput::Elements((3.0 * with_rows) as u64));
+    group.bench_function("fused_forward_backward_pose_per_row/2t", |b| {
+        b.iter(|| {
+            pool2.install(|| {
+                let w = net.forward(&x.encoded, &per_row).unwrap();
+                w.sum_all().unwrap().backward().unwrap()
+            })
+        });
+    });
     // The runtime's inference kernels on the same network: FRAMES frames of POINTS vertices.
     // (The network's cost does not depend on the pose values, so any FRAMES poses do.)
     let mut r = skinfield_benches::rng(3);
