@@ -151,6 +151,14 @@ pub(super) fn config() -> TrainConfig {
     }
 }
 
+/// A SkinNet trainer on `data` with `cfg`, run to its end in a temporary work folder.
+fn trained(data: TrainData, cfg: TrainConfig) -> Trainer {
+    let mut t = Trainer::new(data, cfg, false).unwrap();
+    t.run(&tempfile::tempdir().unwrap().path().join("w"), false)
+        .unwrap();
+    t
+}
+
 fn outputs(t: &Trainer) -> Vec<f32> {
     t.weights(&[0, 1])
         .unwrap()
@@ -582,10 +590,7 @@ fn the_warm_start_stops_once_converged_and_reports_hitting_its_cap() {
             iterations: 0,
             ..config()
         };
-        let mut t = Trainer::new(data.clone(), cfg, false).unwrap();
-        t.run(&tempfile::tempdir().unwrap().path().join("w"), false)
-            .unwrap();
-        t.warm_status()
+        trained(data.clone(), cfg).warm_status()
     };
     // Any KL passes: converged as soon as the window is full.
     let easy = run(1e9, 40);
@@ -794,9 +799,7 @@ fn candidate_joints_make_far_joint_spikes_impossible() {
             },
             ..config()
         };
-        let mut t = Trainer::new(data.clone(), cfg, false).unwrap();
-        t.run(&tempfile::tempdir().unwrap().path().join("f"), false)
-            .unwrap();
+        let t = trained(data.clone(), cfg);
         // The largest distance (over vertices and training frames) between a vertex skinned
         // with the learned weights and with the initial ones.
         let w = t.weights(&[0, 1, 2, 3]).unwrap().to_vec3::<f32>().unwrap();
@@ -851,9 +854,7 @@ fn the_warm_start_converges_for_20_and_70_joints_alike() {
             checkpoint_every: 0,
             ..TrainConfig::default()
         };
-        let mut t = Trainer::new(data, cfg.clone(), false).unwrap();
-        t.run(&tempfile::tempdir().unwrap().path().join("w"), false)
-            .unwrap();
+        let t = trained(data, cfg.clone());
         let s = t.warm_status();
         eprintln!("{joints} joints: {s:?}");
         assert!(
@@ -1203,9 +1204,7 @@ fn kl_per_row(p: &[f32], q: &[f32], j: usize) -> f64 {
 #[test]
 fn a_frozen_net_keeps_its_parameters_while_its_trainer_goes_on() {
     let (data, _) = scene(3);
-    let mut t = Trainer::new(data, config(), false).unwrap();
-    t.run(&tempfile::tempdir().unwrap().path().join("a"), false)
-        .unwrap();
+    let mut t = trained(data, config());
     let frozen = t.frozen_net().unwrap();
     let (rows, mask) = t.net_rows(None).unwrap();
     let poses = t.pose_tensor(&[0, 1]).unwrap();
@@ -1393,10 +1392,7 @@ fn pose_locality_keeps_weights_from_following_joints_that_do_not_move_them() {
             },
             ..config()
         };
-        let mut t = Trainer::new(data.clone(), cfg, false).unwrap();
-        t.run(&tempfile::tempdir().unwrap().path().join("f"), false)
-            .unwrap();
-        t
+        trained(data.clone(), cfg)
     };
     let free = non_candidate_sensitivity(&train(false));
     let local = non_candidate_sensitivity(&train(true));

@@ -145,35 +145,17 @@ fn init_rows(
         false,
         threads,
     );
-    if poses.per_row {
-        let rows = frames * vertices;
-        z.par_chunks_mut(vertices * out).for_each(|frame_rows| {
-            for (row, a) in frame_rows
-                .chunks_exact_mut(out)
-                .zip(per_vertex.chunks_exact(out))
-            {
-                for ((z, a), b) in row.iter_mut().zip(a).zip(bias) {
-                    *z = a + b;
-                }
-            }
-        });
+    // One row per frame: the bias, plus with a pose per frame that frame's pose product.
+    let mut per_frame: Vec<f32> = (0..frames).flat_map(|_| bias.iter().copied()).collect();
+    if !poses.per_row {
         matmul(
-            MatMut::row_major(z, rows, out),
-            MatRef::row_major(poses.data, rows, qw),
+            MatMut::row_major(&mut per_frame, frames, out),
+            MatRef::row_major(poses.data, frames, qw),
             wm.columns(prev + pw, qw).t(),
             true,
-            threads,
+            1,
         );
-        return;
     }
-    let mut per_frame: Vec<f32> = (0..frames).flat_map(|_| bias.iter().copied()).collect();
-    matmul(
-        MatMut::row_major(&mut per_frame, frames, out),
-        MatRef::row_major(poses.data, frames, qw),
-        wm.columns(prev + pw, qw).t(),
-        true,
-        1,
-    );
     z.par_chunks_mut(vertices * out)
         .zip(per_frame.par_chunks(out))
         .for_each(|(frame_rows, c)| {
@@ -186,6 +168,16 @@ fn init_rows(
                 }
             }
         });
+    if poses.per_row {
+        let rows = frames * vertices;
+        matmul(
+            MatMut::row_major(z, rows, out),
+            MatRef::row_major(poses.data, rows, qw),
+            wm.columns(prev + pw, qw).t(),
+            true,
+            threads,
+        );
+    }
 }
 
 /// Row-wise softmax in place (`width` columns).

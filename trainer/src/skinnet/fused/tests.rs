@@ -170,6 +170,26 @@ fn check_masked(
     assert_eq!(checked, 3 * fused.layers().len());
 }
 
+/// The gradient of `l` with respect to every variable of `varmap`, flattened and concatenated
+/// in the order of the variables' names.
+fn sorted_gradients(l: &Tensor, varmap: &VarMap) -> Vec<f32> {
+    let g = l.backward().unwrap();
+    let vars = varmap.data().lock().unwrap();
+    let mut names: Vec<_> = vars.keys().cloned().collect();
+    names.sort();
+    names
+        .iter()
+        .flat_map(|n| {
+            g.get(vars[n].as_tensor())
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap()
+        })
+        .collect()
+}
+
 fn seeded_vars(config: ModelConfig, seed: u64) -> VarMap {
     TrainableSkinNet::seeded(config, seed, 1.0).unwrap().1
 }
@@ -280,16 +300,7 @@ fn a_pose_per_row_that_repeats_the_frames_pose_gives_the_frames_weights() {
         let (net, varmap) = TrainableSkinNet::seeded(config, 64, 1.0).unwrap();
         let net = net.with_backend(backend);
         let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-        let gradient = |w: &Tensor| {
-            let g = loss(w, &target).backward().unwrap();
-            let vars = varmap.data().lock().unwrap();
-            let mut names: Vec<_> = vars.keys().cloned().collect();
-            names.sort();
-            names
-                .iter()
-                .flat_map(|n| flat(g.get(vars[n].as_tensor()).unwrap()))
-                .collect::<Vec<f32>>()
-        };
+        let gradient = |w: &Tensor| sorted_gradients(&loss(w, &target), &varmap);
         let per_frame = net.forward(&enc, &poses).unwrap();
         let per_row = net.forward(&enc, &rows).unwrap();
         let close = |a: &[f32], b: &[f32], what: &str| {
@@ -370,23 +381,7 @@ fn a_step_is_deterministic_and_a_second_backward_recomputes() {
     let q = config.pose_width();
     let poses = Tensor::from_vec(random_values(2 * q, 1.0, 3), (2, q), &dev).unwrap();
     let target = Tensor::from_vec(random_values(2 * 40 * 6, 1.0, 4), (2, 40, 6), &dev).unwrap();
-    let grads = |l: &Tensor| {
-        let g = l.backward().unwrap();
-        let vars = varmap.data().lock().unwrap();
-        let mut names: Vec<_> = vars.keys().cloned().collect();
-        names.sort();
-        names
-            .iter()
-            .flat_map(|n| {
-                g.get(vars[n].as_tensor())
-                    .unwrap()
-                    .flatten_all()
-                    .unwrap()
-                    .to_vec1::<f32>()
-                    .unwrap()
-            })
-            .collect::<Vec<f32>>()
-    };
+    let grads = |l: &Tensor| sorted_gradients(l, &varmap);
     let l1 = loss(&net.forward(&enc, &poses).unwrap(), &target);
     let first = grads(&l1);
     // The same graph again: its saved activations were consumed, so the op recomputes them.
