@@ -220,7 +220,8 @@ pub struct TrainConfig {
     /// 1,000 iterations) Chamfer 0.613 ± 0.003 against 0.598 ± 0.030 cm without it, with the
     /// vertex furthest off the true surface beyond bone heat's worst on 4 test frames instead
     /// of 13; on the character zoo CesiumMan and the Fox pass both worst-vertex checks with it
-    /// and not without (docs/experiments/fidelity.md).
+    /// and not without. It costs the poses between the training frames (the held-out-phase
+    /// captures): 0.512 ± 0.007 cm against 0.494 ± 0.012 (docs/experiments/fidelity.md).
     pub pose_locality: bool,
 }
 
