@@ -134,31 +134,7 @@ impl<'a> TriangleGrid<'a> {
             let b = ((b - lo) / cell).floor();
             (a.x as i64, a.y as i64, b.x as i64, b.y as i64)
         };
-        let ncell = (dims[0] * dims[1]) as usize;
-        let mut start = vec![0usize; ncell + 1];
-        for t in &triangles {
-            let (x0, y0, x1, y1) = range(t);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    start[(y * dims[0] + x) as usize + 1] += 1;
-                }
-            }
-        }
-        for c in 0..ncell {
-            start[c + 1] += start[c];
-        }
-        let mut fill = start.clone();
-        let mut items = vec![0u32; start[ncell]];
-        for (k, t) in triangles.iter().enumerate() {
-            let (x0, y0, x1, y1) = range(t);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    let c = (y * dims[0] + x) as usize;
-                    items[fill[c]] = k as u32;
-                    fill[c] += 1;
-                }
-            }
-        }
+        let (start, items) = super::cell_lists(&triangles, dims, range);
         Self {
             uv,
             triangles,

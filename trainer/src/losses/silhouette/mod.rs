@@ -112,6 +112,40 @@ pub fn huber(r: f32, delta: f32) -> (f32, f32) {
     }
 }
 
+/// The lists of a uniform grid of `dims` cells in compressed form: the items whose inclusive
+/// cell range `range(item)` (`x0, y0, x1, y1`, inside the grid) covers cell `c = y · dims[0] + x`
+/// are `items[start[c]..start[c + 1]]`, in item order (shared by the outline's segment grid and
+/// the rasterised triangles' grid in [`edges`]).
+fn cell_lists<T>(
+    all: &[T],
+    dims: [i64; 2],
+    range: impl Fn(&T) -> (i64, i64, i64, i64),
+) -> (Vec<usize>, Vec<u32>) {
+    let ncell = (dims[0] * dims[1]) as usize;
+    let cells = |t: &T| {
+        let (x0, y0, x1, y1) = range(t);
+        (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| (y * dims[0] + x) as usize))
+    };
+    let mut start = vec![0usize; ncell + 1];
+    for t in all {
+        for c in cells(t) {
+            start[c + 1] += 1;
+        }
+    }
+    for c in 0..ncell {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut items = vec![0u32; start[ncell]];
+    for (i, t) in all.iter().enumerate() {
+        for c in cells(t) {
+            items[fill[c]] = i as u32;
+            fill[c] += 1;
+        }
+    }
+    (start, items)
+}
+
 /// Exact nearest-segment queries over 2D segments with a uniform grid (each segment is listed
 /// in every cell its bounding box touches).
 struct SegmentGrid {
@@ -144,31 +178,7 @@ impl SegmentGrid {
             let b = ((s[0].max(s[1]) - lo) / cell).floor();
             (a.x as i64, a.y as i64, b.x as i64, b.y as i64)
         };
-        let ncell = (dims[0] * dims[1]) as usize;
-        let mut start = vec![0usize; ncell + 1];
-        for s in segments {
-            let (x0, y0, x1, y1) = range(s);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    start[(y * dims[0] + x) as usize + 1] += 1;
-                }
-            }
-        }
-        for c in 0..ncell {
-            start[c + 1] += start[c];
-        }
-        let mut fill = start.clone();
-        let mut items = vec![0u32; start[ncell]];
-        for (i, s) in segments.iter().enumerate() {
-            let (x0, y0, x1, y1) = range(s);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    let c = (y * dims[0] + x) as usize;
-                    items[fill[c]] = i as u32;
-                    fill[c] += 1;
-                }
-            }
-        }
+        let (start, items) = cell_lists(segments, dims, range);
         Self {
             cell,
             origin: lo,
