@@ -185,14 +185,18 @@ pub struct TrainConfig {
     /// its cell instead of at the training vertex itself ([`super::queries`]). Measured on the
     /// built-in capture: see the module docs.
     pub full_resolution_queries: bool,
-    /// Positional-encoding frequency count L of SkinNet (and of the appearance nets); default 6
-    /// (see `docs/design.md`, *Positional encoding*). Measured before
-    /// [`Self::full_resolution_queries`] existed, demo schedule: L = 4 scored 1.030 cm Chamfer
-    /// on the novel test poses against 1.166 cm for L = 6, since lower frequencies vary less
-    /// between training vertices; the queries fix that at L = 6 (0.953 cm), so the default stays.
-    /// L = 8 (finer than the 1–3 cm finger bones of the zoo's robot and Witch) let the robot's
-    /// warm start converge in 1,138 iterations instead of 1,843 but its SkinNet scored 1.497 cm
-    /// instead of 1.257 (docs/experiments/fidelity.md).
+    /// Positional-encoding frequency count L of SkinNet (and of the appearance nets); default 8
+    /// (see `docs/design.md`, *Positional encoding*): the finest period is then 1/128 of the
+    /// normalisation cube (2 cm on the built-in character) instead of 1/32 at L = 6. Measured
+    /// with pose locality on, the demo's budget and captures of seeds 0–2: Chamfer on the novel
+    /// test motions 0.593 ± 0.018 cm against 0.613 ± 0.003 at L = 6, on the held-out phases
+    /// 0.497 ± 0.005 against 0.512 ± 0.007 (the static baseline there: 0.506 ± 0.008, so
+    /// SkinNet is below it on every seed again); the character zoo (400 image iterations, seed
+    /// 0) lower on four characters, higher on the built-in one (0.739 against 0.648), which
+    /// converges more slowly at L = 8 (docs/experiments/fidelity.md, *Positional encoding L = 8*).
+    /// Earlier (before [`Self::full_resolution_queries`]) L = 4 had beaten L = 6 (1.030 against
+    /// 1.166 cm), and L = 8 had cost the robot (1.497 against 1.257 cm) under that day's
+    /// bone heat; neither holds with today's trainer.
     pub pe_frequencies: u32,
     /// Store the training poses' feature range in the exported `.skf` (`PRNG`), so the runtime
     /// clamps the pose features of any pose into it ([`skinfield_formats::skf::pose_range`]).
@@ -259,7 +263,7 @@ impl Default for TrainConfig {
             output_init_scale: 0.1,
             static_epsilon: 1e-4,
             full_resolution_queries: true,
-            pe_frequencies: 6,
+            pe_frequencies: 8,
             clamp_pose_features: true,
             silhouette_huber_px: crate::losses::silhouette::DEFAULT_HUBER_PX,
             stages: super::stages::StageConfig::default(),
