@@ -37,10 +37,8 @@
 
 use glam::{DQuat, DVec3};
 
-use super::solve::{
-    Detection, FrameFit, Observation, TrackError, Tracker, cholesky_factor, cholesky_substitute,
-    normal_equations,
-};
+use super::dense::{cholesky_factor, cholesky_substitute, normal_equations};
+use super::solve::{Detection, FrameFit, Observation, TrackError, Tracker};
 
 /// Frames a calibration uses at most (evenly spread): the lengths are shared, and 32 frames of
 /// a dozen views see every bone hundreds of times.

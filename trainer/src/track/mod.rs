@@ -4,6 +4,7 @@
 //! - [`kinematics`]: joint angles and root rotation → landmark positions (f64);
 //! - [`alignment`]: the root translation in closed form from the rays through the detections;
 //! - [`solve`]: the per-frame robust Levenberg–Marquardt fit;
+//! - `dense`: the normal equations and Cholesky solves of the fits;
 //! - [`calibration`]: bone offsets shared by every frame, fitted to the keypoints;
 //! - [`silhouette`]: the optional silhouette refinement on the skinned template;
 //! - [`capture`]: landmark maps, synthetic keypoints in a capture, tracking all its frames;
@@ -12,6 +13,7 @@
 pub mod alignment;
 pub mod calibration;
 pub mod capture;
+mod dense;
 pub mod kinematics;
 pub mod silhouette;
 pub mod solve;
