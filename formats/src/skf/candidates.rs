@@ -18,7 +18,8 @@
 //! below the joint count and strictly ascending before the padding; positions are finite.
 
 use super::tag;
-use super::view::{SkfError, Tag, check_header_len, le_f32, le_u16, le_u32};
+use super::view::{check_header_len, le_f32, le_u16, le_u32};
+use super::{SkfError, Tag};
 use alloc::vec::Vec;
 
 /// Cap on the number of anchors.

@@ -29,15 +29,19 @@
 
 pub mod candidates;
 mod config;
+mod error;
 pub mod pose_range;
+mod tensor;
 mod view;
 #[cfg(feature = "std")]
 mod write;
 
 pub use candidates::CandidatesView;
 pub use config::{ModelConfig, Net, SkfConfigError};
+pub use error::SkfError;
 pub use pose_range::PoseRangeView;
-pub use view::{Dtype, SkeletonView, SkfError, SkfView, Tag, TensorName, TensorView};
+pub use tensor::{Dtype, Tag, TensorName, TensorView};
+pub use view::{SkeletonView, SkfView};
 #[cfg(feature = "std")]
 pub use write::{Candidates, PoseRange, SkfFileError, SkfModel, read_skf_file, write_atomic};
 

@@ -21,7 +21,8 @@
 //! [`crate::pose_feature_count`]; every bound is finite and no lower bound exceeds its upper one.
 
 use super::tag;
-use super::view::{SkfError, Tag, check_header_len, le_f32, le_u32};
+use super::view::{check_header_len, le_f32, le_u32};
+use super::{SkfError, Tag};
 use alloc::vec::Vec;
 
 /// Size of the fixed part of the section.

@@ -6,8 +6,9 @@ use std::path::{Path, PathBuf};
 use half::f16;
 
 use super::config::{ModelConfig, Net};
-use super::view::{Dtype, LayerName, SkfError, SkfView, TensorName, tensor_name};
+use super::view::{LayerName, SkfView, tensor_name};
 use super::*;
+use super::{Dtype, SkfError, TensorName};
 use crate::skeleton::Skeleton;
 
 /// An owned model ready to be written: configuration, skeleton and f32 tensors (stored as f16).
