@@ -164,6 +164,15 @@ pub fn load_makehuman_dir(
     )
 }
 
+/// One file of an asset, already read: its path (named in errors) and its text.
+#[derive(Clone, Copy, Debug)]
+pub struct SourceText<'a> {
+    /// Where the text came from; errors name it.
+    pub path: &'a Path,
+    /// The file's contents.
+    pub text: &'a str,
+}
+
 /// Reads a MakeHuman OBJ, skeleton and weights.
 pub fn load_makehuman(
     obj: &Path,
@@ -171,8 +180,33 @@ pub fn load_makehuman(
     mhw: &Path,
     options: &MakeHumanOptions,
 ) -> Result<MakeHumanAsset, MakeHumanError> {
-    let text = read_text(obj)?;
-    let parsed = parse_obj(obj, &text)?;
+    let (obj_text, skel_text, mhw_text) = (read_text(obj)?, read_text(mhskel)?, read_text(mhw)?);
+    parse_makehuman(
+        SourceText {
+            path: obj,
+            text: &obj_text,
+        },
+        SourceText {
+            path: mhskel,
+            text: &skel_text,
+        },
+        SourceText {
+            path: mhw,
+            text: &mhw_text,
+        },
+        options,
+    )
+}
+
+/// Parses a MakeHuman OBJ, skeleton and weights from their texts (what [`load_makehuman`] does
+/// after reading the files; untrusted text gives a typed error naming the file, never a panic).
+pub fn parse_makehuman(
+    obj: SourceText<'_>,
+    mhskel: SourceText<'_>,
+    mhw: SourceText<'_>,
+    options: &MakeHumanOptions,
+) -> Result<MakeHumanAsset, MakeHumanError> {
+    let parsed = parse_obj(obj.path, obj.text)?;
     let selected: Vec<bool> = parsed
         .group_names
         .iter()
@@ -210,7 +244,7 @@ pub fn load_makehuman(
     };
     template.compute_normals();
     template.validate().map_err(|source| MakeHumanError::Mesh {
-        path: obj.to_owned(),
+        path: obj.path.to_owned(),
         source,
     })?;
 
@@ -243,25 +277,25 @@ fn read_text(path: &Path) -> Result<String, MakeHumanError> {
     std::fs::read_to_string(path).map_err(io)
 }
 
-fn read_json(path: &Path) -> Result<serde_json::Value, MakeHumanError> {
-    let text = read_text(path)?;
-    serde_json::from_str(&text).map_err(|source| MakeHumanError::Json {
-        path: path.to_owned(),
-        source,
+fn parse_json(source: SourceText<'_>) -> Result<serde_json::Value, MakeHumanError> {
+    serde_json::from_str(source.text).map_err(|e| MakeHumanError::Json {
+        path: source.path.to_owned(),
+        source: e,
     })
 }
 
 fn read_skeleton(
-    path: &Path,
+    source: SourceText<'_>,
     obj_positions: &[Vec3],
     scale: f32,
 ) -> Result<(Skeleton, Vec<Vec3>), MakeHumanError> {
+    let path = source.path;
     let field = |field: &str, what: String| MakeHumanError::Field {
         path: path.to_owned(),
         field: field.to_owned(),
         what,
     };
-    let json = read_json(path)?;
+    let json = parse_json(source)?;
     let bones = json
         .get("bones")
         .and_then(|b| b.as_object())
@@ -409,17 +443,18 @@ fn read_skeleton(
 }
 
 fn read_weights(
-    path: &Path,
+    source: SourceText<'_>,
     skeleton: &Skeleton,
     remap: &[u32],
     vertices: usize,
 ) -> Result<StaticSkin, MakeHumanError> {
+    let path = source.path;
     let field = |field: String, what: String| MakeHumanError::Field {
         path: path.to_owned(),
         field,
         what,
     };
-    let json = read_json(path)?;
+    let json = parse_json(source)?;
     let weights = json
         .get("weights")
         .and_then(|w| w.as_object())
@@ -579,6 +614,62 @@ mod tests {
         ));
         let e = load_makehuman(&dir.path().join("none.obj"), &s, &w, &opts).unwrap_err();
         assert!(matches!(e, MakeHumanError::Io { .. }));
+    }
+    /// Writes the fuzz target's seed (the hand-made asset's three files joined by zero bytes)
+    /// to `$SKINFIELD_FUZZ_SEEDS/makehuman/` when that variable is set (`fuzz/README.md`).
+    #[test]
+    #[ignore = "writes fuzz seeds; run on request"]
+    fn write_fuzz_seeds() {
+        let Some(dir) = std::env::var_os("SKINFIELD_FUZZ_SEEDS") else {
+            return;
+        };
+        let dir = PathBuf::from(dir).join("makehuman");
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("hand_made"), format!("{OBJ}\0{SKEL}\0{MHW}")).unwrap();
+    }
+
+    /// meshoptimizer's reader test: every prefix of each file (the other two whole) is read or
+    /// refused with an error naming a file, never a panic; a cut JSON file is refused by name.
+    #[test]
+    fn every_truncated_prefix_is_read_or_refused_naming_a_file() {
+        let opts = MakeHumanOptions::default();
+        let paths = [
+            Path::new("a.obj"),
+            Path::new("a.mhskel"),
+            Path::new("a.mhw"),
+        ];
+        let whole = [OBJ, SKEL, MHW];
+        let mut read = 0;
+        for f in 0..3 {
+            for end in (0..whole[f].len()).filter(|&e| whole[f].is_char_boundary(e)) {
+                let mut texts = whole;
+                texts[f] = &whole[f][..end];
+                let source = |k: usize| SourceText {
+                    path: paths[k],
+                    text: texts[k],
+                };
+                match parse_makehuman(source(0), source(1), source(2), &opts) {
+                    Ok(a) => {
+                        assert_eq!(f, 0, "a cut JSON file was read ({end} bytes)");
+                        a.template.validate().unwrap();
+                        assert_eq!(a.skin.vertex_count(), a.template.positions.len());
+                        assert_eq!(a.skin.joint_count(), a.skeleton.len());
+                        read += 1;
+                    }
+                    Err(e) => {
+                        let message = e.to_string();
+                        let named = if f == 0 { &paths[..] } else { &paths[f..=f] };
+                        assert!(
+                            named.iter().any(|p| message.contains(p.to_str().unwrap())),
+                            "{} cut at {end}: {message}",
+                            paths[f].display()
+                        );
+                    }
+                }
+            }
+        }
+        // Cutting the OBJ's trailing group still leaves a valid body.
+        assert!(read > 0);
     }
 }
 
