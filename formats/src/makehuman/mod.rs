@@ -615,6 +615,7 @@ mod tests {
         let e = load_makehuman(&dir.path().join("none.obj"), &s, &w, &opts).unwrap_err();
         assert!(matches!(e, MakeHumanError::Io { .. }));
     }
+
     /// Writes the fuzz target's seed (the hand-made asset's three files joined by zero bytes)
     /// to `$SKINFIELD_FUZZ_SEEDS/makehuman/` when that variable is set (`fuzz/README.md`).
     #[test]
