@@ -1,7 +1,8 @@
 //! `makehuman::parse_makehuman` on arbitrary bytes split at their first two zero bytes into an
 //! OBJ, a `.mhskel` and a `.mhw` (missing parts empty; each read as lossy UTF-8; every OBJ group
-//! selected, so a seed is the three files joined by zero bytes): an asset that parses has a valid template, one weight list per template vertex
-//! over the skeleton's joints, and an OBJ vertex behind every template vertex.
+//! selected, so a seed is the three files joined by zero bytes): an asset that parses has a
+//! valid template, one weight list per template vertex over the skeleton's joints, an OBJ
+//! vertex behind every template vertex, and a finite tail for every bone.
 #![no_main]
 
 use std::path::Path;
@@ -27,7 +28,10 @@ fuzz_target!(|data: &[u8]| {
         source(2, "fuzz.mhw"),
         &options,
     ) {
-        asset.template.validate().expect("a parsed template is valid");
+        asset
+            .template
+            .validate()
+            .expect("a parsed template is valid");
         assert_eq!(asset.skin.vertex_count(), asset.template.positions.len());
         assert_eq!(asset.skin.joint_count(), asset.skeleton.len());
         assert_eq!(asset.obj_vertex.len(), asset.template.positions.len());
