@@ -70,7 +70,7 @@ pub mod diagnostics;
 pub mod distance;
 pub mod fast;
 pub mod figure;
-pub mod methods;
+mod methods;
 pub mod posing;
 pub mod reconstruction;
 pub mod spread;
