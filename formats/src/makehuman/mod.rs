@@ -19,17 +19,21 @@
 //! - `.mhw` weights are not normalised in the file (sums 0.32–1.67); [`StaticSkin::new`]
 //!   normalises them and counts how many were off.
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use glam::{Mat3, Quat, Vec3};
+use glam::Vec3;
 
-use crate::math::Transform;
-use crate::mesh::{MeshError, Template};
-use crate::skeleton::{MAX_JOINTS, Skeleton, SkeletonError};
-use crate::skin::{SkinError, StaticSkin};
+use crate::mesh::Template;
+use crate::skeleton::Skeleton;
+use crate::skin::StaticSkin;
 
+mod error;
+mod mhskel;
+mod mhw;
 mod obj;
+pub use error::MakeHumanError;
+use mhskel::read_skeleton;
+use mhw::read_weights;
 use obj::parse_obj;
 
 /// Largest file this reader opens (bytes); `base.obj` is about 2 MiB.
@@ -38,79 +42,6 @@ pub const MAX_FILE_BYTES: u64 = 256 << 20;
 pub const MAX_TRIANGLES: usize = 1 << 24;
 /// Most vertices one OBJ polygon may list.
 pub const MAX_POLYGON_CORNERS: usize = 64;
-
-/// Why a MakeHuman asset could not be read.
-#[derive(Debug, thiserror::Error)]
-pub enum MakeHumanError {
-    /// The file could not be read.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// The file is larger than [`MAX_FILE_BYTES`].
-    #[error("{path}: file has {bytes} bytes, more than the cap of {MAX_FILE_BYTES}")]
-    TooLarge {
-        /// The file.
-        path: PathBuf,
-        /// Its size.
-        bytes: u64,
-    },
-    /// An OBJ line is malformed or out of range.
-    #[error("{path}:{line}: {what}")]
-    Obj {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line number.
-        line: usize,
-        /// What is wrong.
-        what: String,
-    },
-    /// The JSON does not parse.
-    #[error("{path}: invalid JSON: {source}")]
-    Json {
-        /// The file.
-        path: PathBuf,
-        /// The parser's error.
-        source: serde_json::Error,
-    },
-    /// A JSON field is missing, of the wrong type or refers to something that does not exist.
-    #[error("{path}: field `{field}`: {what}")]
-    Field {
-        /// The file.
-        path: PathBuf,
-        /// The field (a JSON path).
-        field: String,
-        /// What is wrong.
-        what: String,
-    },
-    /// The skeleton is invalid.
-    #[error("{path}: {source}")]
-    Skeleton {
-        /// The `.mhskel` file.
-        path: PathBuf,
-        /// Why.
-        source: SkeletonError,
-    },
-    /// The selected groups give an invalid mesh.
-    #[error("{path}: {source}")]
-    Mesh {
-        /// The OBJ file.
-        path: PathBuf,
-        /// Why.
-        source: MeshError,
-    },
-    /// The weights are invalid (e.g. a template vertex has none).
-    #[error("{path}: {source}")]
-    Skin {
-        /// The `.mhw` file.
-        path: PathBuf,
-        /// Why.
-        source: SkinError,
-    },
-}
 
 /// What to read.
 #[derive(Clone, Debug)]
@@ -277,6 +208,7 @@ fn read_text(path: &Path) -> Result<String, MakeHumanError> {
     std::fs::read_to_string(path).map_err(io)
 }
 
+/// The JSON of `source`, or an error naming its file.
 fn parse_json(source: SourceText<'_>) -> Result<serde_json::Value, MakeHumanError> {
     serde_json::from_str(source.text).map_err(|e| MakeHumanError::Json {
         path: source.path.to_owned(),
@@ -284,231 +216,10 @@ fn parse_json(source: SourceText<'_>) -> Result<serde_json::Value, MakeHumanErro
     })
 }
 
-fn read_skeleton(
-    source: SourceText<'_>,
-    obj_positions: &[Vec3],
-    scale: f32,
-) -> Result<(Skeleton, Vec<Vec3>), MakeHumanError> {
-    let path = source.path;
-    let field = |field: &str, what: String| MakeHumanError::Field {
-        path: path.to_owned(),
-        field: field.to_owned(),
-        what,
-    };
-    let json = parse_json(source)?;
-    let bones = json
-        .get("bones")
-        .and_then(|b| b.as_object())
-        .ok_or_else(|| field("bones", "missing or not an object".into()))?;
-    let joints = json
-        .get("joints")
-        .and_then(|b| b.as_object())
-        .ok_or_else(|| field("joints", "missing or not an object".into()))?;
-    let planes = json.get("planes").and_then(|b| b.as_object());
-    if bones.len() > MAX_JOINTS {
-        return Err(MakeHumanError::Skeleton {
-            path: path.to_owned(),
-            source: SkeletonError::TooManyJoints(bones.len()),
-        });
-    }
-    let joint_pos = |name: &str, at: &str| -> Result<Vec3, MakeHumanError> {
-        let list = joints
-            .get(name)
-            .and_then(|l| l.as_array())
-            .ok_or_else(|| field(at, format!("joint `{name}` is not listed in `joints`")))?;
-        if list.is_empty() {
-            return Err(field(&format!("joints.{name}"), "empty vertex list".into()));
-        }
-        let mut sum = glam::DVec3::ZERO;
-        for v in list {
-            let i = v
-                .as_u64()
-                .filter(|&i| (i as usize) < obj_positions.len())
-                .ok_or_else(|| {
-                    field(
-                        &format!("joints.{name}"),
-                        format!("`{v}` is not a vertex index below {}", obj_positions.len()),
-                    )
-                })?;
-            sum += obj_positions[i as usize].as_dvec3();
-        }
-        Ok((sum / list.len() as f64).as_vec3() * scale)
-    };
-
-    // Parent links by name; BTreeMap keeps the walk below deterministic (children in name order).
-    let mut children: BTreeMap<Option<&str>, Vec<&str>> = BTreeMap::new();
-    for (name, bone) in bones {
-        let parent = match bone.get("parent") {
-            None | Some(serde_json::Value::Null) => None,
-            Some(serde_json::Value::String(p)) => {
-                if !bones.contains_key(p) {
-                    return Err(field(
-                        &format!("bones.{name}.parent"),
-                        format!("unknown bone `{p}`"),
-                    ));
-                }
-                Some(p.as_str())
-            }
-            Some(other) => {
-                return Err(field(
-                    &format!("bones.{name}.parent"),
-                    format!("`{other}` is not a string"),
-                ));
-            }
-        };
-        children.entry(parent).or_default().push(name.as_str());
-    }
-    let mut order: Vec<&str> = Vec::with_capacity(bones.len());
-    let mut stack: Vec<&str> = children
-        .get(&None)
-        .map(|c| c.iter().rev().copied().collect())
-        .unwrap_or_default();
-    while let Some(b) = stack.pop() {
-        order.push(b);
-        if let Some(c) = children.get(&Some(b)) {
-            stack.extend(c.iter().rev());
-        }
-    }
-    if order.len() != bones.len() {
-        return Err(field("bones", "parent links form a cycle".into()));
-    }
-    let index: BTreeMap<&str, usize> = order.iter().enumerate().map(|(i, &n)| (n, i)).collect();
-
-    let n = order.len();
-    let mut heads = Vec::with_capacity(n);
-    let mut tails = Vec::with_capacity(n);
-    let mut world_rot = Vec::with_capacity(n);
-    let mut parents = Vec::with_capacity(n);
-    for &name in &order {
-        let bone = &bones[name];
-        let at = |k: &str| format!("bones.{name}.{k}");
-        let jname = |k: &str| {
-            bone.get(k)
-                .and_then(|v| v.as_str())
-                .ok_or_else(|| field(&at(k), "missing or not a string".into()))
-        };
-        let head = joint_pos(jname("head")?, &at("head"))?;
-        let tail = joint_pos(jname("tail")?, &at("tail"))?;
-        let y = (tail - head).try_normalize().unwrap_or(Vec3::Y);
-        let normal = bone
-            .get("rotation_plane")
-            .and_then(|p| p.as_str())
-            .and_then(|p| planes.and_then(|pl| pl.get(p)))
-            .and_then(|p| p.as_array())
-            .filter(|p| p.len() == 3)
-            .map(|p| -> Result<Vec3, MakeHumanError> {
-                let mut q = [Vec3::ZERO; 3];
-                for (q, name) in q.iter_mut().zip(p) {
-                    let name = name.as_str().ok_or_else(|| {
-                        field(&at("rotation_plane"), "plane joint is not a string".into())
-                    })?;
-                    *q = joint_pos(name, &at("rotation_plane"))?;
-                }
-                Ok((q[1] - q[0]).cross(q[2] - q[1]))
-            })
-            .transpose()?
-            .unwrap_or(Vec3::ZERO);
-        let x = (normal - normal.dot(y) * y)
-            .try_normalize()
-            .unwrap_or_else(|| y.any_orthonormal_vector());
-        let z = x.cross(y);
-        world_rot.push(Quat::from_mat3(&Mat3::from_cols(x, y, z)).normalize());
-        heads.push(head);
-        tails.push(tail);
-        parents.push(
-            bone.get("parent")
-                .and_then(|p| p.as_str())
-                .map(|p| index[p]),
-        );
-    }
-    let bind_local = (0..n)
-        .map(|j| match parents[j] {
-            None => Transform::from_rotation_translation(world_rot[j], heads[j]),
-            Some(p) => {
-                let inv = world_rot[p].inverse();
-                Transform::from_rotation_translation(
-                    (inv * world_rot[j]).normalize(),
-                    inv * (heads[j] - heads[p]),
-                )
-            }
-        })
-        .collect();
-    let names = order.iter().map(|s| (*s).to_owned()).collect();
-    let skeleton = Skeleton::new(names, parents, bind_local, None, None, glam::Mat4::IDENTITY)
-        .map_err(|source| MakeHumanError::Skeleton {
-            path: path.to_owned(),
-            source,
-        })?;
-    Ok((skeleton, tails))
-}
-
-fn read_weights(
-    source: SourceText<'_>,
-    skeleton: &Skeleton,
-    remap: &[u32],
-    vertices: usize,
-) -> Result<StaticSkin, MakeHumanError> {
-    let path = source.path;
-    let field = |field: String, what: String| MakeHumanError::Field {
-        path: path.to_owned(),
-        field,
-        what,
-    };
-    let json = parse_json(source)?;
-    let weights = json
-        .get("weights")
-        .and_then(|w| w.as_object())
-        .ok_or_else(|| field("weights".into(), "missing or not an object".into()))?;
-    let mut per_vertex: Vec<Vec<(u32, f32)>> = vec![Vec::new(); vertices];
-    for (bone, list) in weights {
-        let at = || format!("weights.{bone}");
-        let j = skeleton
-            .find(bone)
-            .ok_or_else(|| field(at(), "no bone of that name in the skeleton".into()))?;
-        let list = list
-            .as_array()
-            .ok_or_else(|| field(at(), "not an array".into()))?;
-        for pair in list {
-            let (v, w) = match pair.as_array().map(Vec::as_slice) {
-                Some([v, w]) => (v.as_u64(), w.as_f64()),
-                _ => (None, None),
-            };
-            let (Some(v), Some(w)) = (v, w) else {
-                return Err(field(
-                    at(),
-                    format!("`{pair}` is not a [vertex, weight] pair"),
-                ));
-            };
-            let t = *remap.get(v as usize).ok_or_else(|| {
-                field(
-                    at(),
-                    format!("vertex {v} is beyond the OBJ's {}", remap.len()),
-                )
-            })?;
-            if t != u32::MAX {
-                per_vertex[t as usize].push((j as u32, w as f32));
-            }
-        }
-    }
-    let mut offsets = Vec::with_capacity(vertices + 1);
-    offsets.push(0u32);
-    let (mut joints, mut ws) = (Vec::new(), Vec::new());
-    for mut inf in per_vertex {
-        inf.sort_by_key(|&(j, _)| j);
-        for (j, w) in inf {
-            joints.push(j);
-            ws.push(w);
-        }
-        offsets.push(joints.len() as u32);
-    }
-    StaticSkin::new(offsets, joints, ws, skeleton.len()).map_err(|source| MakeHumanError::Skin {
-        path: path.to_owned(),
-        source,
-    })
-}
-
 #[cfg(test)]
 mod tests {
+    use std::path::PathBuf;
+
     use super::*;
 
     fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -676,6 +387,8 @@ mod tests {
 
 #[cfg(test)]
 mod shared_asset_tests {
+    use std::collections::BTreeMap;
+
     use super::*;
 
     /// The counts of `makehuman-hm08/SOURCE.md`, checked against the real files.
