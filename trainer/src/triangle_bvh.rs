@@ -237,6 +237,48 @@ impl TriangleBvh {
     }
 }
 
+impl TriangleBvh {
+    /// The smallest parameter `t ∈ (0, 1]` at which the segment `p → q` crosses a triangle
+    /// (`p + t (q − p)` is the crossing), or `None` if it crosses none: where a ray from inside a
+    /// closed surface leaves it.
+    #[must_use]
+    pub(crate) fn first_hit(&self, p: DVec3, q: DVec3) -> Option<f64> {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let d = q - p;
+        let inv = d.recip();
+        let mut best: Option<f64> = None;
+        let mut stack: Vec<u32> = Vec::with_capacity(64);
+        stack.push(0);
+        while let Some(i) = stack.pop() {
+            let node = self.nodes[i as usize];
+            // A box that the segment up to the best crossing so far misses holds no nearer one.
+            let reach = best.unwrap_or(1.0);
+            if !slab_hit(p, inv * (1.0 / reach), node.min, node.max) {
+                continue;
+            }
+            if node.count > 0 {
+                let (s, e) = (
+                    node.start as usize,
+                    node.start as usize + node.count as usize,
+                );
+                for &t in &self.order[s..e] {
+                    if let Some(s) =
+                        intersect(p, d, &self.corners(t)).filter(|&s| s > 0.0 && s <= 1.0)
+                    {
+                        best = Some(best.map_or(s, |b| b.min(s)));
+                    }
+                }
+            } else {
+                stack.push(node.start);
+                stack.push(node.right);
+            }
+        }
+        best
+    }
+}
+
 fn box_distance_squared(p: DVec3, node: &Node) -> f64 {
     let d = (node.min - p).max(p - node.max).max(DVec3::ZERO);
     d.length_squared()
@@ -382,6 +424,47 @@ mod tests {
         }
         // The check is meaningful only if both outcomes occur.
         assert!(hits > 20 && hits < 480, "{hits}");
+    }
+
+    #[test]
+    fn first_hit_is_the_nearest_crossing_of_brute_force() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut r = || {
+            DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
+        let positions: Vec<DVec3> = (0..200)
+            .flat_map(|_| {
+                let c = r();
+                [c + r() * 0.3, c + r() * 0.3, c + r() * 0.3]
+            })
+            .collect::<Vec<_>>();
+        let triangles: Vec<[u32; 3]> = (0..200).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        let bvh = TriangleBvh::new_f64(&positions, &triangles);
+        let (mut hits, mut several) = (0, 0);
+        for k in 0..500 {
+            let (p, q) = (r(), r() * 1.5);
+            let crossings: Vec<f64> = triangles
+                .iter()
+                .filter_map(|t| {
+                    intersect(p, q - p, &t.map(|v| positions[v as usize]))
+                        .filter(|&s| s > 0.0 && s <= 1.0)
+                })
+                .collect();
+            let brute = crossings.iter().copied().reduce(f64::min);
+            assert_eq!(bvh.first_hit(p, q), brute, "query {k}");
+            hits += usize::from(brute.is_some());
+            several += usize::from(crossings.len() > 1);
+        }
+        // Meaningful only if segments miss, hit once and hit several triangles.
+        assert!(hits > 50 && hits < 450 && several > 20, "{hits} {several}");
+        assert_eq!(
+            TriangleBvh::new(&[], &[]).first_hit(DVec3::ZERO, DVec3::X),
+            None
+        );
     }
 
     #[test]

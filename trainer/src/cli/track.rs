@@ -13,7 +13,8 @@ use skinfield_formats::capture::{Capture, CaptureWriter, MANIFEST_FILE, load_cap
 use skinfield_trainer::eval::{PreparedSkinning, Skinning};
 use skinfield_trainer::track::TrackOptions;
 use skinfield_trainer::track::capture::{
-    default_landmark_map, joint_side_landmark_map, mpjpe, track_capture, write_synthetic_keypoints,
+    default_landmark_map, joint_side_landmark_map, joint_surface_landmark_map, mpjpe,
+    track_capture, write_synthetic_keypoints,
 };
 use skinfield_trainer::track::synthetic::DetectionNoise;
 
@@ -94,6 +95,9 @@ pub enum LandmarkSet {
     /// One keypoint per joint and one beside each joint, off its bone, which sees the limbs'
     /// twists.
     JointSides,
+    /// The side points moved out to the template's surface (a marker set or a dense detector),
+    /// which sees the turns of short bones (head, feet) that a quarter of the bone cannot.
+    JointSurface,
 }
 
 /// Writes synthetic keypoints (the landmark map `args.landmarks` of its skeleton) into `capture`.
@@ -107,6 +111,9 @@ pub fn synthesize_keypoints(capture: &Capture, args: &NoiseArgs) -> anyhow::Resu
     let map = match args.landmarks {
         LandmarkSet::Default => default_landmark_map(&capture.skeleton),
         LandmarkSet::JointSides => joint_side_landmark_map(&capture.skeleton),
+        LandmarkSet::JointSurface => {
+            joint_surface_landmark_map(&capture.skeleton, &capture.template)
+        }
     };
     write_synthetic_keypoints(capture, &map, &noise).context("writing synthetic keypoints")?;
     println!(

@@ -1,10 +1,10 @@
 //! Tracking a capture on disk: the landmark map of a skeleton, synthetic keypoints written into
 //! a capture, and the frame-by-frame tracking of all its frames.
 
-use glam::{DVec3, Mat4};
+use glam::{DMat4, DVec3, Mat4};
 use skinfield_formats::capture::keypoints::{BODY_25, Keypoint2d, LandmarkEntry, LandmarkMapFile};
 use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
-use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
+use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin, Template};
 
 use super::calibration::BoneCalibration;
 use super::kinematics::{Kinematics, Landmark};
@@ -12,6 +12,7 @@ use super::silhouette::{BodySkinMismatch, TrackingBody};
 use super::solve::{Detection, FrameFit, TrackError, TrackOptions, Tracker};
 use super::synthetic::{BODY_25_PAIRS, BUILT_IN_BODY_25, DetectionNoise, detect, noise_rng};
 use crate::template::hull::HullView;
+use crate::triangle_bvh::TriangleBvh;
 
 /// Folder the synthetic keypoints go to, relative to the capture.
 pub const KEYPOINTS_FOLDER: &str = "keypoints";
@@ -102,6 +103,62 @@ pub fn default_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
 /// detector do.
 #[must_use]
 pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
+    side_landmark_map(skeleton, "joints+sides", |_, offset| offset)
+}
+
+/// The landmarks of [`joint_side_landmark_map`] moved out to the template's surface: each
+/// `.side` and `.tip` point goes in the same direction from its joint, but as far as the first
+/// crossing of the bind-pose mesh (`template`, in the skeleton's bind space), where a marker or
+/// a dense detector's surface point would be. Why: a quarter of a short bone is a centimetre or
+/// two (CesiumMan's head: 1.3 cm), so pixel noise turns the head and the feet by 10° or more,
+/// while the surface is 5–15 cm from those joints (a face's landmarks, the toes). A point whose
+/// ray leaves through a hole, or never meets the mesh within twice its bounding-box diagonal,
+/// keeps the quarter-bone offset; a joint outside the mesh gets the point where its ray enters it.
+#[must_use]
+pub fn joint_surface_landmark_map(skeleton: &Skeleton, template: &Template) -> LandmarkMapFile {
+    let bvh = TriangleBvh::new(&template.positions, &template.triangles);
+    let (lo, hi) = template.positions.iter().fold(
+        (
+            glam::Vec3::splat(f32::INFINITY),
+            glam::Vec3::splat(f32::NEG_INFINITY),
+        ),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let reach = 2.0 * f64::from((hi - lo).length());
+    // Bind-space matrix of every joint (None where the inverse bind cannot be inverted).
+    let bind: Vec<Option<DMat4>> = skeleton
+        .inverse_bind()
+        .iter()
+        .map(|m| {
+            let m = m.as_dmat4();
+            (m.determinant().abs() > 1e-12).then(|| m.inverse())
+        })
+        .collect();
+    side_landmark_map(skeleton, "joints+surface", |j, offset| {
+        let Some(b) = bind[j] else {
+            return offset;
+        };
+        let head = b.w_axis.truncate();
+        let along = b.transform_vector3(offset.as_dvec3());
+        let length = along.length();
+        if !(reach.is_finite() && length > 0.0) {
+            return offset;
+        }
+        match bvh.first_hit(head, head + along * (reach / length)) {
+            Some(t) => offset * (t * reach / length) as f32,
+            None => offset,
+        }
+    })
+}
+
+/// One keypoint per joint plus `{joint}.side` (and `{joint}.tip` for leaves) at the quarter-bone
+/// offsets of [`joint_side_landmark_map`], each passed through `place(joint, offset)` (the
+/// joint's local frame) before it is stored.
+fn side_landmark_map(
+    skeleton: &Skeleton,
+    detector: &str,
+    place: impl Fn(usize, glam::Vec3) -> glam::Vec3,
+) -> LandmarkMapFile {
     let local = skeleton.bind_local();
     let mut landmarks = joint_landmarks(skeleton);
     for (j, name) in skeleton.names().iter().enumerate() {
@@ -130,7 +187,7 @@ pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
             landmarks.push(LandmarkEntry {
                 keypoint: format!("{name}.{suffix}"),
                 joint: name.clone(),
-                offset: offset.to_array(),
+                offset: place(j, offset).to_array(),
             });
         };
         add("side", side);
@@ -140,7 +197,7 @@ pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
     }
     LandmarkMapFile {
         format: "skinfield-landmarks".into(),
-        detector: "joints+sides".into(),
+        detector: detector.into(),
         // One keypoint per landmark, in the same order.
         keypoints: landmarks.iter().map(|l| l.keypoint.clone()).collect(),
         landmarks,
@@ -611,6 +668,70 @@ mod tests {
             landmarks: Vec::new(),
         };
         assert_eq!(left_right_pairs(&map), vec![(1, 2), (3, 4), (5, 6)]);
+    }
+
+    #[test]
+    fn surface_points_lie_on_the_template_along_the_side_points() {
+        let dir = tempfile::tempdir().unwrap();
+        let capture = tiny_capture(dir.path());
+        let (skeleton, template) = (&capture.skeleton, &capture.template);
+        let sides = joint_side_landmark_map(skeleton);
+        let surface = joint_surface_landmark_map(skeleton, template);
+        assert_eq!(surface.detector, "joints+surface");
+        assert_eq!(surface.keypoints, sides.keypoints);
+        let bvh = TriangleBvh::new(&template.positions, &template.triangles);
+        let (lo, hi) = template.positions.iter().fold(
+            (
+                glam::Vec3::splat(f32::INFINITY),
+                glam::Vec3::splat(f32::NEG_INFINITY),
+            ),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        let size = (hi - lo).length();
+        let (mut moved, mut longer) = (0, 0);
+        for (side, point) in sides.landmarks.iter().zip(&surface.landmarks) {
+            assert_eq!(
+                (&side.keypoint, &side.joint),
+                (&point.keypoint, &point.joint)
+            );
+            let (a, b) = (
+                glam::Vec3::from_array(side.offset),
+                glam::Vec3::from_array(point.offset),
+            );
+            if a == glam::Vec3::ZERO {
+                assert_eq!(b, glam::Vec3::ZERO, "{}", point.keypoint);
+                continue;
+            }
+            // The same direction from the joint; either on the mesh or the quarter-bone point.
+            assert!(
+                a.normalize().dot(b.normalize()) > 1.0 - 1e-5,
+                "{}",
+                point.keypoint
+            );
+            let j = skeleton.find(&point.joint).unwrap();
+            let at = skeleton.inverse_bind()[j].inverse().transform_point3(b);
+            let off = bvh.closest(at).unwrap().distance_squared.sqrt();
+            if a == b {
+                continue;
+            }
+            assert!(
+                off < 1e-4 * size,
+                "{} is {off} off the mesh",
+                point.keypoint
+            );
+            moved += 1;
+            longer += usize::from(b.length() > a.length());
+        }
+        // Nearly every ray from inside the body meets it, mostly beyond the quarter bone.
+        let with_offsets = sides.landmarks.len() - skeleton.len();
+        assert!(
+            5 * moved >= 4 * with_offsets,
+            "{moved} of {with_offsets} moved"
+        );
+        assert!(2 * longer >= moved, "{longer} of {moved} longer");
+        // Exact detections of the surface points give every joint's orientation back.
+        let worst = worst_rotation_entry(dir.path(), &surface);
+        assert!(worst < 1e-3, "with surface points: {worst}");
     }
 
     /// Tracks `capture` from exact detections of `map` (keypoints only) and returns the largest
