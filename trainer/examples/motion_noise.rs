@@ -16,13 +16,14 @@
 //! OUT scores it at the true test poses. Prints the mean per-joint position error (MPJPE) of the
 //! perturbed training frames against the input, in file units.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use glam::{Quat, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::capture::{CaptureWriter, MANIFEST_FILE, load_capture};
+use skinfield_trainer::files::copy_tree;
 use skinfield_trainer::track::capture::mpjpe;
 
 fn main() -> Result<()> {
@@ -117,26 +118,4 @@ fn gaussian3(rng: &mut ChaCha8Rng) -> Vec3 {
     let (x, y) = pair();
     let (z, _) = pair();
     Vec3::new(x as f32, y as f32, z as f32)
-}
-
-/// Hard-links (or copies) the files under `from` into `to`, except those in `skip`.
-fn copy_tree(from: &Path, to: &Path, skip: &[PathBuf]) -> Result<()> {
-    std::fs::create_dir_all(to).with_context(|| format!("creating {}", to.display()))?;
-    for entry in std::fs::read_dir(from).with_context(|| format!("reading {}", from.display()))? {
-        let entry = entry?;
-        let (src, dst) = (entry.path(), to.join(entry.file_name()));
-        if skip.contains(&src) {
-            continue;
-        }
-        if entry.file_type()?.is_dir() {
-            copy_tree(&src, &dst, skip)?;
-        } else {
-            let _ = std::fs::remove_file(&dst);
-            if std::fs::hard_link(&src, &dst).is_err() {
-                std::fs::copy(&src, &dst)
-                    .with_context(|| format!("copying {} to {}", src.display(), dst.display()))?;
-            }
-        }
-    }
-    Ok(())
 }

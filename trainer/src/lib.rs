@@ -5,6 +5,7 @@ pub mod appearance;
 pub mod bilinear;
 pub mod candidates;
 pub mod eval;
+pub mod files;
 pub mod geodesic;
 pub mod heat;
 pub mod losses;

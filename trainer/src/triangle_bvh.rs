@@ -391,24 +391,35 @@ mod tests {
         );
     }
 
+    /// A point uniform in [-1, 1]³.
+    fn random_point(rng: &mut ChaCha8Rng) -> DVec3 {
+        DVec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        )
+    }
+
+    /// `n` separate triangles, each corner within `spread` (per axis) of a centre uniform in
+    /// [-1, 1]³, and the generator that drew them, for the queries.
+    fn random_soup(seed: u64, n: u32, spread: f64) -> (ChaCha8Rng, Vec<DVec3>, Vec<[u32; 3]>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut positions = Vec::new();
+        for _ in 0..n {
+            let c = random_point(&mut rng);
+            for _ in 0..3 {
+                positions.push(c + random_point(&mut rng) * spread);
+            }
+        }
+        let triangles = (0..n).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        (rng, positions, triangles)
+    }
+
     #[test]
     fn agrees_with_brute_force_on_random_soups() {
-        let mut rng = ChaCha8Rng::seed_from_u64(7);
-        let mut r = || {
-            DVec3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
-        };
         // Small triangles scattered in a cube, so that some segments hit and some miss.
-        let positions: Vec<DVec3> = (0..100)
-            .flat_map(|_| {
-                let c = r();
-                [c + r() * 0.2, c + r() * 0.2, c + r() * 0.2]
-            })
-            .collect::<Vec<_>>();
-        let triangles: Vec<[u32; 3]> = (0..100).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        let (mut rng, positions, triangles) = random_soup(7, 100, 0.2);
+        let mut r = || random_point(&mut rng);
         let bvh = TriangleBvh::new_f64(&positions, &triangles);
         let mut hits = 0;
         for k in 0..500 {
@@ -428,21 +439,8 @@ mod tests {
 
     #[test]
     fn first_hit_is_the_nearest_crossing_of_brute_force() {
-        let mut rng = ChaCha8Rng::seed_from_u64(11);
-        let mut r = || {
-            DVec3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
-        };
-        let positions: Vec<DVec3> = (0..200)
-            .flat_map(|_| {
-                let c = r();
-                [c + r() * 0.3, c + r() * 0.3, c + r() * 0.3]
-            })
-            .collect::<Vec<_>>();
-        let triangles: Vec<[u32; 3]> = (0..200).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect();
+        let (mut rng, positions, triangles) = random_soup(11, 200, 0.3);
+        let mut r = || random_point(&mut rng);
         let bvh = TriangleBvh::new_f64(&positions, &triangles);
         let (mut hits, mut several) = (0, 0);
         for k in 0..500 {

@@ -101,7 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         skip.push(capture.dir.join(&e.gt_meshes));
         skip.extend(e.true_weights.iter().map(|p| capture.dir.join(p)));
     }
-    super::copy_tree(&capture.dir, &args.out, &skip)?;
+    skinfield_trainer::files::copy_tree(&capture.dir, &args.out, &skip)?;
     let writer = CaptureWriter::new(&args.out, manifest)?;
     writer.write_template(&r.template, &r.skeleton)?;
     writer.write_initial_weights(&heat.skin)?;

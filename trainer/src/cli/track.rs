@@ -197,7 +197,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .motion
         .get_or_insert_with(|| "motion.json".into())
         .clone();
-    super::copy_tree(
+    skinfield_trainer::files::copy_tree(
         &capture.dir,
         &args.out,
         &[
