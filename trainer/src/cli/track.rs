@@ -13,8 +13,8 @@ use skinfield_formats::capture::{Capture, CaptureWriter, MANIFEST_FILE, load_cap
 use skinfield_trainer::eval::{PreparedSkinning, Skinning};
 use skinfield_trainer::track::TrackOptions;
 use skinfield_trainer::track::capture::{
-    default_landmark_map, joint_side_landmark_map, joint_surface_landmark_map, mpjpe,
-    track_capture, write_synthetic_keypoints,
+    default_landmark_map, joint_side_landmark_map, joint_surface_landmark_map, mean_turn_error_deg,
+    mpjpe, track_capture, write_synthetic_keypoints,
 };
 use skinfield_trainer::track::synthetic::DetectionNoise;
 
@@ -211,20 +211,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     // Against the input's motion, when it has one (a synthetic capture's ground truth).
     let errors = if capture.has_motion() {
-        Some(mpjpe(&capture.skeleton, &tracked.poses, &capture.poses)?)
+        Some((
+            mpjpe(&capture.skeleton, &tracked.poses, &capture.poses)?,
+            mean_turn_error_deg(&capture.skeleton, &tracked.poses, &capture.poses)?,
+        ))
     } else {
         None
     };
     let csv_path = args.out.join("track.csv");
     let mut csv = String::from(
-        "frame,detections,inliers,far,rms_inlier_px,median_px,limit_excess_rad,iterations,mpjpe_vs_input\n",
+        "frame,detections,inliers,far,rms_inlier_px,median_px,limit_excess_rad,iterations,mpjpe_vs_input,turn_deg_vs_input\n",
     );
     for (f, fit) in tracked.fits.iter().enumerate() {
         let r = &fit.report;
         let e = errors
             .as_ref()
-            .map(|e| format!("{:.6}", e[f]))
-            .unwrap_or_default();
+            .map(|(e, t)| format!("{:.6},{:.3}", e[f], t[f]))
+            .unwrap_or_else(|| ",".into());
         csv += &format!(
             "{f},{},{},{},{:.4},{:.4},{:.5},{},{e}\n",
             r.detections,
@@ -264,13 +267,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.out.display(),
         csv_path.display()
     )?;
-    if let Some(errors) = &errors {
+    if let Some((errors, turns)) = &errors {
         let mean = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
         let worst = errors.iter().copied().fold(0.0, f64::max);
+        let turn = turns.iter().sum::<f64>() / turns.len().max(1) as f64;
         writeln!(
             out,
             "mean per-joint position error against the input's motion: {mean:.3} (worst frame \
-             {worst:.3}) skeleton units"
+             {worst:.3}) skeleton units; mean joint turn error {turn:.2}°"
         )?;
     }
     writeln!(

@@ -511,6 +511,35 @@ pub fn mpjpe(skeleton: &Skeleton, a: &[Pose], b: &[Pose]) -> Result<Vec<f64>, Sk
         .collect()
 }
 
+/// Mean over joints of the angle (degrees) between two motions' world rotations of each joint,
+/// per frame. MPJPE does not see a leaf's turn (the head, a foot, a hand move no joint), which
+/// is what the surface turns with; this does.
+pub fn mean_turn_error_deg(
+    skeleton: &Skeleton,
+    a: &[Pose],
+    b: &[Pose],
+) -> Result<Vec<f64>, SkeletonError> {
+    let mut wa = vec![Mat4::IDENTITY; skeleton.len()];
+    let mut wb = vec![Mat4::IDENTITY; skeleton.len()];
+    a.iter()
+        .zip(b)
+        .map(|(pa, pb)| {
+            skeleton.world_matrices(pa, &mut wa)?;
+            skeleton.world_matrices(pb, &mut wb)?;
+            Ok(wa
+                .iter()
+                .zip(&wb)
+                .map(|(x, y)| {
+                    let (_, qa, _) = x.to_scale_rotation_translation();
+                    let (_, qb, _) = y.to_scale_rotation_translation();
+                    f64::from(qa.angle_between(qb)).to_degrees()
+                })
+                .sum::<f64>()
+                / skeleton.len().max(1) as f64)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use skinfield_formats::capture::load_capture;
@@ -543,6 +572,26 @@ mod tests {
         write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
             .unwrap();
         load_capture(dir).unwrap()
+    }
+
+    #[test]
+    fn a_turn_of_the_root_turns_every_joint_by_its_angle() {
+        let skeleton = crate::synth::character::build_skeleton().unwrap();
+        let pose = skeleton.bind_pose();
+        let mut turned = pose.clone();
+        let root = skeleton.parents().iter().position(Option::is_none).unwrap();
+        turned.locals[root].rotation =
+            glam::Quat::from_rotation_y(10f32.to_radians()) * turned.locals[root].rotation;
+        let e = mean_turn_error_deg(
+            &skeleton,
+            &[pose.clone(), turned.clone()],
+            &[pose, turned.clone()],
+        )
+        .unwrap();
+        assert!(e[0].abs() < 1e-3, "{e:?}");
+        assert!(e[1].abs() < 1e-3, "{e:?}");
+        let e = mean_turn_error_deg(&skeleton, &[turned], &[skeleton.bind_pose()]).unwrap();
+        assert!((e[0] - 10.0).abs() < 1e-2, "{e:?}");
     }
 
     #[test]
