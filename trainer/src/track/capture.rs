@@ -494,21 +494,9 @@ fn frame_masks(capture: &Capture, frame: usize) -> Result<Vec<HullView>, Capture
 /// Mean per-joint position error between two motions of the same skeleton, per frame (units
 /// of the skeleton).
 pub fn mpjpe(skeleton: &Skeleton, a: &[Pose], b: &[Pose]) -> Result<Vec<f64>, SkeletonError> {
-    let mut wa = vec![Mat4::IDENTITY; skeleton.len()];
-    let mut wb = vec![Mat4::IDENTITY; skeleton.len()];
-    a.iter()
-        .zip(b)
-        .map(|(pa, pb)| {
-            skeleton.world_matrices(pa, &mut wa)?;
-            skeleton.world_matrices(pb, &mut wb)?;
-            Ok(wa
-                .iter()
-                .zip(&wb)
-                .map(|(x, y)| f64::from(x.w_axis.truncate().distance(y.w_axis.truncate())))
-                .sum::<f64>()
-                / skeleton.len() as f64)
-        })
-        .collect()
+    per_frame_joint_mean(skeleton, a, b, |x, y| {
+        f64::from(x.w_axis.truncate().distance(y.w_axis.truncate()))
+    })
 }
 
 /// Mean over joints of the angle (degrees) between two motions' world rotations of each joint,
@@ -519,6 +507,20 @@ pub fn mean_turn_error_deg(
     a: &[Pose],
     b: &[Pose],
 ) -> Result<Vec<f64>, SkeletonError> {
+    per_frame_joint_mean(skeleton, a, b, |x, y| {
+        let (_, qa, _) = x.to_scale_rotation_translation();
+        let (_, qb, _) = y.to_scale_rotation_translation();
+        f64::from(qa.angle_between(qb)).to_degrees()
+    })
+}
+
+/// Per frame, the mean over joints of `measure(world_a, world_b)`.
+fn per_frame_joint_mean(
+    skeleton: &Skeleton,
+    a: &[Pose],
+    b: &[Pose],
+    measure: impl Fn(&Mat4, &Mat4) -> f64,
+) -> Result<Vec<f64>, SkeletonError> {
     let mut wa = vec![Mat4::IDENTITY; skeleton.len()];
     let mut wb = vec![Mat4::IDENTITY; skeleton.len()];
     a.iter()
@@ -526,15 +528,7 @@ pub fn mean_turn_error_deg(
         .map(|(pa, pb)| {
             skeleton.world_matrices(pa, &mut wa)?;
             skeleton.world_matrices(pb, &mut wb)?;
-            Ok(wa
-                .iter()
-                .zip(&wb)
-                .map(|(x, y)| {
-                    let (_, qa, _) = x.to_scale_rotation_translation();
-                    let (_, qb, _) = y.to_scale_rotation_translation();
-                    f64::from(qa.angle_between(qb)).to_degrees()
-                })
-                .sum::<f64>()
+            Ok(wa.iter().zip(&wb).map(|(x, y)| measure(x, y)).sum::<f64>()
                 / skeleton.len().max(1) as f64)
         })
         .collect()
