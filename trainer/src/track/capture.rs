@@ -117,14 +117,10 @@ pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
 #[must_use]
 pub fn joint_surface_landmark_map(skeleton: &Skeleton, template: &Template) -> LandmarkMapFile {
     let bvh = TriangleBvh::new(&template.positions, &template.triangles);
-    let (lo, hi) = template.positions.iter().fold(
-        (
-            glam::Vec3::splat(f32::INFINITY),
-            glam::Vec3::splat(f32::NEG_INFINITY),
-        ),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
-    let reach = 2.0 * f64::from((hi - lo).length());
+    // Infinite (every point keeps its quarter-bone offset) for an empty or non-finite mesh.
+    let reach = template
+        .bounds()
+        .map_or(f64::INFINITY, |b| 2.0 * f64::from(b.size().length()));
     // Bind-space matrix of every joint (None where the inverse bind cannot be inverted).
     let bind: Vec<Option<DMat4>> = skeleton
         .inverse_bind()
@@ -723,14 +719,7 @@ mod tests {
         assert_eq!(surface.detector, "joints+surface");
         assert_eq!(surface.keypoints, sides.keypoints);
         let bvh = TriangleBvh::new(&template.positions, &template.triangles);
-        let (lo, hi) = template.positions.iter().fold(
-            (
-                glam::Vec3::splat(f32::INFINITY),
-                glam::Vec3::splat(f32::NEG_INFINITY),
-            ),
-            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-        );
-        let size = (hi - lo).length();
+        let size = template.bounds().unwrap().size().length();
         let (mut moved, mut longer) = (0, 0);
         for (side, point) in sides.landmarks.iter().zip(&surface.landmarks) {
             assert_eq!(
