@@ -235,9 +235,7 @@ impl TriangleBvh {
         }
         false
     }
-}
 
-impl TriangleBvh {
     /// The smallest parameter `t ∈ (0, 1]` at which the segment `p → q` crosses a triangle
     /// (`p + t (q − p)` is the crossing), or `None` if it crosses none: where a ray from inside a
     /// closed surface leaves it.
