@@ -16,7 +16,8 @@ use rand_chacha::ChaCha8Rng;
 use skinfield_formats::JointDofs;
 use skinfield_trainer::synth::character::build_skeleton;
 use skinfield_trainer::synth::rig::camera_rig;
-use skinfield_trainer::track::capture::{joint_side_landmark_map, landmarks_of, left_right_pairs};
+use skinfield_trainer::track::landmarks::{joint_side_landmark_map, landmarks_of};
+use skinfield_trainer::track::mirror::left_right_pairs;
 use skinfield_trainer::track::synthetic::{DetectionNoise, detect, noise_rng};
 use skinfield_trainer::track::{
     Detection, JacobianMethod, Kinematics, Landmark, TrackOptions, Tracker,
@@ -30,7 +31,7 @@ fn bench(c: &mut Criterion) {
     let map = joint_side_landmark_map(&skeleton);
     let (keypoints, landmarks): (Vec<usize>, Vec<Landmark>) =
         landmarks_of(&map, &skeleton).into_iter().unzip();
-    let pairs: Vec<(usize, usize)> = left_right_pairs(&map)
+    let pairs: Vec<(usize, usize)> = left_right_pairs(&map, &skeleton)
         .into_iter()
         .filter_map(|(a, b)| {
             let a = keypoints.iter().position(|&k| k == a)?;

@@ -17,7 +17,8 @@ use glam::{DVec3, Mat4};
 use skinfield_trainer::synth::character::build_skeleton;
 use skinfield_trainer::synth::motion::{TestMotions, library};
 use skinfield_trainer::synth::rig::camera_rig;
-use skinfield_trainer::track::capture::{default_landmark_map, landmarks_of, mpjpe};
+use skinfield_trainer::track::capture::mpjpe;
+use skinfield_trainer::track::landmarks::{default_landmark_map, landmarks_of};
 use skinfield_trainer::track::synthetic::{BODY_25_PAIRS, DetectionNoise, detect, noise_rng};
 use skinfield_trainer::track::{FrameFit, Kinematics, Landmark, TrackOptions, Tracker};
 

@@ -99,7 +99,7 @@ fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
     let map = capture.landmark_map().unwrap().unwrap();
     assert_eq!(
         map,
-        skinfield_trainer::track::capture::joint_side_landmark_map(&capture.skeleton)
+        skinfield_trainer::track::landmarks::joint_side_landmark_map(&capture.skeleton)
     );
     let detections = capture.keypoints(0, 0, map.keypoints.len()).unwrap();
     assert_eq!(detections.len(), map.keypoints.len());

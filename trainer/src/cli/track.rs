@@ -13,8 +13,11 @@ use skinfield_formats::capture::{Capture, CaptureWriter, MANIFEST_FILE, load_cap
 use skinfield_trainer::eval::{PreparedSkinning, Skinning};
 use skinfield_trainer::track::TrackOptions;
 use skinfield_trainer::track::capture::{
-    default_landmark_map, joint_side_landmark_map, joint_surface_landmark_map, mean_turn_error_deg,
-    mpjpe, track_capture, write_synthetic_keypoints,
+    mean_turn_error_deg, mpjpe, track_capture, write_synthetic_keypoints,
+};
+use skinfield_trainer::track::landmarks::{
+    default_landmark_map, joint_ring_landmark_map, joint_side_landmark_map,
+    joint_surface_landmark_map,
 };
 use skinfield_trainer::track::synthetic::DetectionNoise;
 
@@ -98,6 +101,9 @@ pub enum LandmarkSet {
     /// The side points moved out to the template's surface (a marker set or a dense detector),
     /// which sees the turns of short bones (head, feet) that a quarter of the bone cannot.
     JointSurface,
+    /// Four surface points around every bone instead of one (a marker set's several markers
+    /// per segment), which average the noise of each.
+    JointRing,
 }
 
 /// Writes synthetic keypoints (the landmark map `args.landmarks` of its skeleton) into `capture`.
@@ -114,6 +120,7 @@ pub fn synthesize_keypoints(capture: &Capture, args: &NoiseArgs) -> anyhow::Resu
         LandmarkSet::JointSurface => {
             joint_surface_landmark_map(&capture.skeleton, &capture.template)
         }
+        LandmarkSet::JointRing => joint_ring_landmark_map(&capture.skeleton, &capture.template),
     };
     write_synthetic_keypoints(capture, &map, &noise).context("writing synthetic keypoints")?;
     println!(

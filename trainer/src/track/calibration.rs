@@ -471,7 +471,7 @@ mod tests {
     use super::*;
     use crate::synth::character::build_skeleton;
     use crate::synth::rig::camera_rig;
-    use crate::track::capture::{joint_side_landmark_map, landmarks_of};
+    use crate::track::landmarks::{joint_side_landmark_map, landmarks_of};
     use crate::track::tests::{exact_detections, random_angles};
     use crate::track::{Kinematics, Landmark, TrackOptions};
 

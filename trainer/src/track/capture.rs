@@ -1,18 +1,19 @@
-//! Tracking a capture on disk: the landmark map of a skeleton, synthetic keypoints written into
-//! a capture, and the frame-by-frame tracking of all its frames.
+//! Tracking a capture on disk: synthetic keypoints written into a capture, and the
+//! frame-by-frame tracking of all its frames.
 
-use glam::{DMat4, DVec3, Mat4};
-use skinfield_formats::capture::keypoints::{BODY_25, Keypoint2d, LandmarkEntry, LandmarkMapFile};
+use glam::{DVec3, Mat4};
+use skinfield_formats::capture::keypoints::{Keypoint2d, LandmarkMapFile};
 use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
-use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin, Template};
+use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
 
 use super::calibration::BoneCalibration;
 use super::kinematics::{Kinematics, Landmark};
+use super::landmarks::landmarks_of;
+use super::mirror::left_right_pairs;
 use super::silhouette::{BodySkinMismatch, TrackingBody};
 use super::solve::{Detection, FrameFit, TrackError, TrackOptions, Tracker};
-use super::synthetic::{BODY_25_PAIRS, BUILT_IN_BODY_25, DetectionNoise, detect, noise_rng};
+use super::synthetic::{DetectionNoise, detect, noise_rng};
 use crate::template::hull::HullView;
-use crate::triangle_bvh::TriangleBvh;
 
 /// Folder the synthetic keypoints go to, relative to the capture.
 pub const KEYPOINTS_FOLDER: &str = "keypoints";
@@ -61,203 +62,6 @@ pub enum CaptureTrackError {
     },
 }
 
-/// The landmark map for `skeleton`: OpenPose BODY_25 when it has the built-in character's
-/// joints, otherwise one keypoint per joint (detector `joints`, keypoint = joint name), the
-/// layout of a detector trained on that rig.
-#[must_use]
-pub fn default_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
-    let builtin = BUILT_IN_BODY_25
-        .iter()
-        .all(|(_, joint, _)| skeleton.find(joint).is_some());
-    if builtin {
-        LandmarkMapFile {
-            format: "skinfield-landmarks".into(),
-            detector: "BODY_25".into(),
-            keypoints: BODY_25.iter().map(|s| (*s).to_owned()).collect(),
-            landmarks: BUILT_IN_BODY_25
-                .iter()
-                .map(|(k, j, o)| LandmarkEntry {
-                    keypoint: (*k).to_owned(),
-                    joint: (*j).to_owned(),
-                    offset: *o,
-                })
-                .collect(),
-        }
-    } else {
-        LandmarkMapFile {
-            format: "skinfield-landmarks".into(),
-            detector: "joints".into(),
-            keypoints: skeleton.names().to_vec(),
-            landmarks: joint_landmarks(skeleton),
-        }
-    }
-}
-
-/// The landmark map of a detector that sees, besides every joint, a point beside it: one
-/// keypoint per joint (named as the joint) and one per joint named `{joint}.side`, offset from
-/// the joint perpendicular to its bone by a quarter of the bone's length (the bone to its first
-/// child, or for a leaf the bone from its parent). A leaf, whose bone has no end to see, also
-/// gets `{joint}.tip`, a quarter of the length further along its bone. The side points observe
-/// each limb's twist about its bone, which a keypoint per joint cannot
-/// (docs/experiments/tracking.md), as the surface keypoints of a marker set or a dense
-/// detector do.
-#[must_use]
-pub fn joint_side_landmark_map(skeleton: &Skeleton) -> LandmarkMapFile {
-    side_landmark_map(skeleton, "joints+sides", |_, offset| offset)
-}
-
-/// The landmarks of [`joint_side_landmark_map`] moved out to the template's surface: each
-/// `.side` and `.tip` point goes in the same direction from its joint, but as far as the first
-/// crossing of the bind-pose mesh (`template`, in the skeleton's bind space), where a marker or
-/// a dense detector's surface point would be. Why: a quarter of a short bone is a centimetre or
-/// two (CesiumMan's head: 1.3 cm), so pixel noise turns the head and the feet by 10° or more,
-/// while the surface is 5–15 cm from those joints (a face's landmarks, the toes). A point whose
-/// ray leaves through a hole, or never meets the mesh within twice its bounding-box diagonal,
-/// keeps the quarter-bone offset; a joint outside the mesh gets the point where its ray enters it.
-#[must_use]
-pub fn joint_surface_landmark_map(skeleton: &Skeleton, template: &Template) -> LandmarkMapFile {
-    let bvh = TriangleBvh::new(&template.positions, &template.triangles);
-    // Infinite (every point keeps its quarter-bone offset) for an empty or non-finite mesh.
-    let reach = template
-        .bounds()
-        .map_or(f64::INFINITY, |b| 2.0 * f64::from(b.size().length()));
-    // Bind-space matrix of every joint (None where the inverse bind cannot be inverted).
-    let bind: Vec<Option<DMat4>> = skeleton
-        .inverse_bind()
-        .iter()
-        .map(|m| {
-            let m = m.as_dmat4();
-            (m.determinant().abs() > 1e-12).then(|| m.inverse())
-        })
-        .collect();
-    side_landmark_map(skeleton, "joints+surface", |j, offset| {
-        let Some(b) = bind[j] else {
-            return offset;
-        };
-        let head = b.w_axis.truncate();
-        let along = b.transform_vector3(offset.as_dvec3());
-        let length = along.length();
-        if !(reach.is_finite() && length > 0.0) {
-            return offset;
-        }
-        match bvh.first_hit(head, head + along * (reach / length)) {
-            Some(t) => offset * (t * reach / length) as f32,
-            None => offset,
-        }
-    })
-}
-
-/// One keypoint per joint plus `{joint}.side` (and `{joint}.tip` for leaves) at the quarter-bone
-/// offsets of [`joint_side_landmark_map`], each passed through `place(joint, offset)` (the
-/// joint's local frame) before it is stored.
-fn side_landmark_map(
-    skeleton: &Skeleton,
-    detector: &str,
-    place: impl Fn(usize, glam::Vec3) -> glam::Vec3,
-) -> LandmarkMapFile {
-    let local = skeleton.bind_local();
-    let mut landmarks = joint_landmarks(skeleton);
-    for (j, name) in skeleton.names().iter().enumerate() {
-        // The bone in the joint's own frame: to the first child, or back to the parent.
-        let first_child = skeleton.children(j).next();
-        let leaf = first_child.is_none();
-        let bone = match first_child {
-            Some(c) => local[c].translation,
-            None if skeleton.parents()[j].is_some() => {
-                -(local[j].rotation.inverse() * local[j].translation)
-            }
-            None => continue,
-        };
-        let length = bone.length();
-        if !(length.is_finite() && length > 0.0) {
-            continue;
-        }
-        let along = bone / length;
-        // The joint's local axis least aligned with the bone, made perpendicular to it.
-        let axis = [glam::Vec3::X, glam::Vec3::Y, glam::Vec3::Z]
-            .into_iter()
-            .min_by(|a, b| a.dot(along).abs().total_cmp(&b.dot(along).abs()))
-            .expect("three axes");
-        let side = (axis - along * axis.dot(along)).normalize() * (0.25 * length);
-        let mut add = |suffix: &str, offset: glam::Vec3| {
-            landmarks.push(LandmarkEntry {
-                keypoint: format!("{name}.{suffix}"),
-                joint: name.clone(),
-                offset: place(j, offset).to_array(),
-            });
-        };
-        add("side", side);
-        if leaf {
-            add("tip", -0.25 * bone);
-        }
-    }
-    LandmarkMapFile {
-        format: "skinfield-landmarks".into(),
-        detector: detector.into(),
-        // One keypoint per landmark, in the same order.
-        keypoints: landmarks.iter().map(|l| l.keypoint.clone()).collect(),
-        landmarks,
-    }
-}
-
-/// One landmark per joint, at the joint, its keypoint named as the joint.
-fn joint_landmarks(skeleton: &Skeleton) -> Vec<LandmarkEntry> {
-    skeleton
-        .names()
-        .iter()
-        .map(|n| LandmarkEntry {
-            keypoint: n.clone(),
-            joint: n.clone(),
-            offset: [0.0; 3],
-        })
-        .collect()
-}
-
-/// The tracker's landmarks of a (validated) map, and for each the index of its keypoint in the
-/// detector's output.
-#[must_use]
-pub fn landmarks_of(map: &LandmarkMapFile, skeleton: &Skeleton) -> Vec<(usize, Landmark)> {
-    map.landmarks
-        .iter()
-        .filter_map(|l| {
-            let k = map.keypoints.iter().position(|n| *n == l.keypoint)?;
-            let joint = skeleton.find(&l.joint)?;
-            Some((
-                k,
-                Landmark {
-                    joint,
-                    offset: glam::Vec3::from_array(l.offset).as_dvec3(),
-                },
-            ))
-        })
-        .collect()
-}
-
-/// Left/right keypoint pairs of a map (BODY_25's, or joints named `l_*`/`r_*`, `Left*`/`Right*`
-/// or `*.L`/`*.R`), the pairs a synthetic swap exchanges.
-#[must_use]
-pub fn left_right_pairs(map: &LandmarkMapFile) -> Vec<(usize, usize)> {
-    if map.detector == "BODY_25" {
-        return BODY_25_PAIRS.to_vec();
-    }
-    let mirror = |n: &str| -> Option<String> {
-        for (l, r) in [("l_", "r_"), ("Left", "Right"), ("left", "right")] {
-            if let Some(rest) = n.strip_prefix(l) {
-                return Some(format!("{r}{rest}"));
-            }
-        }
-        n.strip_suffix(".L").map(|rest| format!("{rest}.R"))
-    };
-    let k = &map.keypoints;
-    (0..k.len())
-        .filter_map(|i| {
-            let m = mirror(&k[i])?;
-            let j = k.iter().position(|n| *n == m)?;
-            Some((i, j))
-        })
-        .collect()
-}
-
 /// World positions of `landmarks` in `pose` (f32 forward kinematics, widened).
 fn landmark_positions(
     skeleton: &Skeleton,
@@ -288,7 +92,7 @@ pub fn write_synthetic_keypoints(
     let landmarks = landmarks_of(map, &capture.skeleton);
     // Pairs of keypoints, as pairs of landmark slots (the order `detect` sees).
     let slot = |k: usize| landmarks.iter().position(|(i, _)| *i == k);
-    let pairs: Vec<(usize, usize)> = left_right_pairs(map)
+    let pairs: Vec<(usize, usize)> = left_right_pairs(map, &capture.skeleton)
         .into_iter()
         .filter_map(|(a, b)| Some((slot(a)?, slot(b)?)))
         .collect();
@@ -531,13 +335,14 @@ fn per_frame_joint_mean(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use skinfield_formats::capture::load_capture;
 
     use super::*;
+    use crate::track::landmarks::default_landmark_map;
 
     /// Detections without noise, drops or swaps.
-    const EXACT: DetectionNoise = DetectionNoise {
+    pub(in crate::track) const EXACT: DetectionNoise = DetectionNoise {
         sigma_px: 0.0,
         drop_rate: 0.0,
         swap_rate: 0.0,
@@ -545,7 +350,7 @@ mod tests {
     };
 
     /// A tiny synthetic capture (4 cameras at 96²) in `dir`, without keypoints.
-    fn tiny_capture(dir: &std::path::Path) -> Capture {
+    pub(in crate::track) fn tiny_capture(dir: &std::path::Path) -> Capture {
         let config = crate::synth::SynthConfig {
             cameras: 4,
             width: 96,
@@ -686,167 +491,5 @@ mod tests {
             ),
             "{e}"
         );
-    }
-
-    #[test]
-    fn left_right_pairs_are_found_by_name() {
-        let map = LandmarkMapFile {
-            format: "skinfield-landmarks".into(),
-            detector: "joints".into(),
-            keypoints: [
-                "hips",
-                "l_knee",
-                "r_knee",
-                "LeftHand",
-                "RightHand",
-                "arm.L",
-                "arm.R",
-            ]
-            .map(String::from)
-            .to_vec(),
-            landmarks: Vec::new(),
-        };
-        assert_eq!(left_right_pairs(&map), vec![(1, 2), (3, 4), (5, 6)]);
-    }
-
-    #[test]
-    fn surface_points_lie_on_the_template_along_the_side_points() {
-        let dir = tempfile::tempdir().unwrap();
-        let capture = tiny_capture(dir.path());
-        let (skeleton, template) = (&capture.skeleton, &capture.template);
-        let sides = joint_side_landmark_map(skeleton);
-        let surface = joint_surface_landmark_map(skeleton, template);
-        assert_eq!(surface.detector, "joints+surface");
-        assert_eq!(surface.keypoints, sides.keypoints);
-        let bvh = TriangleBvh::new(&template.positions, &template.triangles);
-        let size = template.bounds().unwrap().size().length();
-        let (mut moved, mut longer) = (0, 0);
-        for (side, point) in sides.landmarks.iter().zip(&surface.landmarks) {
-            assert_eq!(
-                (&side.keypoint, &side.joint),
-                (&point.keypoint, &point.joint)
-            );
-            let (a, b) = (
-                glam::Vec3::from_array(side.offset),
-                glam::Vec3::from_array(point.offset),
-            );
-            if a == glam::Vec3::ZERO {
-                assert_eq!(b, glam::Vec3::ZERO, "{}", point.keypoint);
-                continue;
-            }
-            // The same direction from the joint; either on the mesh or the quarter-bone point.
-            assert!(
-                a.normalize().dot(b.normalize()) > 1.0 - 1e-5,
-                "{}",
-                point.keypoint
-            );
-            let j = skeleton.find(&point.joint).unwrap();
-            let at = skeleton.inverse_bind()[j].inverse().transform_point3(b);
-            let off = bvh.closest(at).unwrap().distance_squared.sqrt();
-            if a == b {
-                continue;
-            }
-            assert!(
-                off < 1e-4 * size,
-                "{} is {off} off the mesh",
-                point.keypoint
-            );
-            moved += 1;
-            longer += usize::from(b.length() > a.length());
-        }
-        // Nearly every ray from inside the body meets it, mostly beyond the quarter bone.
-        let with_offsets = sides.landmarks.len() - skeleton.len();
-        assert!(
-            5 * moved >= 4 * with_offsets,
-            "{moved} of {with_offsets} moved"
-        );
-        assert!(2 * longer >= moved, "{longer} of {moved} longer");
-        // Exact detections of the surface points give every joint's orientation back.
-        let worst = worst_rotation_entry(dir.path(), &surface);
-        assert!(worst < 1e-3, "with surface points: {worst}");
-    }
-
-    /// Tracks `capture` from exact detections of `map` (keypoints only) and returns the largest
-    /// difference, over frames and joints, between an entry of a tracked and a true world
-    /// matrix's rotation part.
-    fn worst_rotation_entry(dir: &std::path::Path, map: &LandmarkMapFile) -> f32 {
-        let capture = load_capture(dir).unwrap();
-        write_synthetic_keypoints(&capture, map, &EXACT).unwrap();
-        let capture = load_capture(dir).unwrap();
-        let keypoints_only = TrackOptions {
-            silhouette_weight: 0.0,
-            ..TrackOptions::default()
-        };
-        let tracked = track_capture(&capture, &keypoints_only, None, |_| {}).unwrap();
-        let n = capture.skeleton.len();
-        let (mut got, mut want) = (vec![Mat4::IDENTITY; n], vec![Mat4::IDENTITY; n]);
-        let mut worst = 0.0f32;
-        for (g, w) in tracked.poses.iter().zip(&capture.poses) {
-            capture.skeleton.world_matrices(g, &mut got).unwrap();
-            capture.skeleton.world_matrices(w, &mut want).unwrap();
-            for (a, b) in got.iter().zip(&want) {
-                let d = glam::Mat3::from_mat4(*a) - glam::Mat3::from_mat4(*b);
-                worst = worst.max(d.to_cols_array().iter().fold(0.0, |m, x| m.max(x.abs())));
-            }
-        }
-        worst
-    }
-
-    #[test]
-    fn side_keypoints_see_the_twists_that_joint_keypoints_miss() {
-        let dir = tempfile::tempdir().unwrap();
-        let capture = tiny_capture(dir.path());
-        let sides = joint_side_landmark_map(&capture.skeleton);
-        let skeleton = &capture.skeleton;
-        // A keypoint at every joint, and beside every joint with a bone: perpendicular to the
-        // bone, a quarter of its length away; a leaf also a quarter further along its bone.
-        let leaves = (0..skeleton.len())
-            .filter(|&j| skeleton.children(j).next().is_none())
-            .count();
-        assert_eq!(sides.keypoints.len(), sides.landmarks.len());
-        assert_eq!(sides.landmarks.len(), 2 * skeleton.len() + leaves);
-        for l in sides.landmarks.iter().filter(|l| l.keypoint.contains('.')) {
-            let j = skeleton.find(&l.joint).unwrap();
-            let bone = match skeleton.children(j).next() {
-                Some(c) => skeleton.bind_local()[c].translation,
-                None => {
-                    let t = skeleton.bind_local()[j];
-                    -(t.rotation.inverse() * t.translation)
-                }
-            };
-            let offset = glam::Vec3::from_array(l.offset);
-            assert!(
-                (offset.length() - 0.25 * bone.length()).abs() < 1e-5,
-                "{}",
-                l.keypoint
-            );
-            if l.keypoint == format!("{}.side", l.joint) {
-                assert!(
-                    offset.dot(bone).abs() < 1e-5 * bone.length_squared(),
-                    "{}",
-                    l.keypoint
-                );
-            } else {
-                assert_eq!(l.keypoint, format!("{}.tip", l.joint));
-                assert!((offset + 0.25 * bone).length() < 1e-6, "{}", l.keypoint);
-            }
-        }
-        // Exact detections: with the side points every joint's orientation comes back; with
-        // the joints alone (the same map less its side points) the limbs' twists do not.
-        let joints_only = LandmarkMapFile {
-            detector: "joints".into(),
-            keypoints: skeleton.names().to_vec(),
-            landmarks: sides
-                .landmarks
-                .iter()
-                .filter(|l| !l.keypoint.contains('.'))
-                .cloned()
-                .collect(),
-            ..sides.clone()
-        };
-        let with_sides = worst_rotation_entry(dir.path(), &sides);
-        let without = worst_rotation_entry(dir.path(), &joints_only);
-        assert!(with_sides < 1e-3, "with side points: {with_sides}");
-        assert!(without > 0.05, "joints only: {without}");
     }
 }

@@ -7,7 +7,10 @@
 //! - `dense`: the normal equations and Cholesky solves of the fits;
 //! - [`calibration`]: bone offsets shared by every frame, fitted to the keypoints;
 //! - [`silhouette`]: the optional silhouette refinement on the skinned template;
-//! - [`capture`]: landmark maps, synthetic keypoints in a capture, tracking all its frames;
+//! - [`landmarks`]: which point of the skeleton each keypoint of a detector sees;
+//! - [`capture`]: synthetic keypoints in a capture, tracking all its frames;
+//! - [`mirror`]: the left/right pairs of a detector's keypoints (by name, else by the bind
+//!   pose's symmetry), which a synthetic swap exchanges;
 //! - [`synthetic`]: detections projected from known landmarks, with noise, drops and swaps.
 
 pub mod alignment;
@@ -15,6 +18,8 @@ pub mod calibration;
 pub mod capture;
 mod dense;
 pub mod kinematics;
+pub mod landmarks;
+pub mod mirror;
 pub mod silhouette;
 pub mod solve;
 pub mod synthetic;
@@ -206,7 +211,7 @@ pub(crate) mod tests {
         ];
         let kin = Kinematics::new(&skeleton).with_translating_joints(&moved);
         let landmarks: Vec<Landmark> =
-            capture::landmarks_of(&capture::joint_side_landmark_map(&skeleton), &skeleton)
+            landmarks::landmarks_of(&landmarks::joint_side_landmark_map(&skeleton), &skeleton)
                 .into_iter()
                 .map(|(_, l)| l)
                 .collect();
@@ -243,7 +248,7 @@ pub(crate) mod tests {
         let kin = Kinematics::new(&skeleton);
         let rig = camera_rig(8, 256, 256, 1);
         let landmarks: Vec<Landmark> =
-            capture::landmarks_of(&capture::default_landmark_map(&skeleton), &skeleton)
+            landmarks::landmarks_of(&landmarks::default_landmark_map(&skeleton), &skeleton)
                 .into_iter()
                 .map(|(_, l)| l)
                 .collect();

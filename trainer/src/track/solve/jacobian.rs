@@ -286,7 +286,7 @@ mod tests {
         FrameFit, FrameReport, Problem, SilhouetteTerm, TrackOptions, Tracker, Workspace,
     };
     use crate::template::hull::HullView;
-    use crate::track::capture::{joint_side_landmark_map, landmarks_of};
+    use crate::track::landmarks::{joint_side_landmark_map, landmarks_of};
     use crate::track::silhouette::TrackingBody;
     use crate::track::tests::{exact_detections, random_angles};
     use crate::track::{Detection, Kinematics};
