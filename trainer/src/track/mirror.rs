@@ -15,7 +15,7 @@ use skinfield_formats::capture::keypoints::LandmarkMapFile;
 use super::synthetic::BODY_25_PAIRS;
 
 /// Share of the skeleton's extent within which a joint's mirror image must meet another joint.
-const MIRROR_TOLERANCE: f32 = 0.02;
+pub const MIRROR_TOLERANCE: f32 = 0.02;
 
 /// Left/right keypoint pairs `(i, j)`, `i < j`, of `map` on `skeleton`: BODY_25's, else
 /// `{A}{suffix}`/`{B}{suffix}` where landmarks sit on joints `A` and `B` that mirror each other

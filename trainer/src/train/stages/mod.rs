@@ -32,7 +32,6 @@ use std::path::Path;
 use candle_core::{DType, Device, Tensor};
 use glam::Vec3;
 use rand::seq::index::sample;
-use serde::{Deserialize, Serialize};
 use skinfield_formats::capture::{Capture, CaptureImage};
 use skinfield_formats::mesh::area_weighted_normals;
 
@@ -43,109 +42,7 @@ use crate::losses::lbs::lbs;
 use crate::losses::rendering::{RgbTarget, blur_within_mask, rendering_loss, sample_visible};
 use crate::raster::rasterize;
 use checkpoint::{STAGES_CHECKPOINT, StageProgress, StageState};
-
-/// What colours the rendering loss gives the mesh in stage 4.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ColourSource {
-    /// AlbedoNet × ShadowNet (the paper's method).
-    #[default]
-    Field,
-    /// AlbedoNet only (stage 3 skipped).
-    AlbedoOnly,
-    /// Per-vertex colours averaged from the first training frame's images (no appearance nets).
-    FixedVertexColours,
-}
-
-/// Stages 2–4 (a [`super::TrainConfig`] field; all iterations 0 = stage 1 only).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct StageConfig {
-    /// Stage 2 (AlbedoNet) iterations.
-    pub albedo_iterations: u64,
-    /// Stage 3 (ShadowNet) iterations.
-    pub shadow_iterations: u64,
-    /// Stage 4 (SkinNet refined with the rendering loss) iterations.
-    pub refine_iterations: u64,
-    /// Visible pixels sampled per view and iteration.
-    pub pixels_per_view: usize,
-    /// Views rendered per frame and iteration (0 = all).
-    pub views_per_frame: usize,
-    /// Weight of the rendering loss in stage 4 (per-sample L1 summed over RGB). At 0 stage 4
-    /// renders nothing: SkinNet continues with stage 1's losses on stage 4's learning-rate
-    /// schedule (the "w/o L_rend" control of the ablation).
-    pub rendering_weight: f64,
-    /// Colours used by the rendering loss in stage 4.
-    pub colours: ColourSource,
-    /// Learning rate of the appearance nets (Adam otherwise as in stage 1).
-    pub appearance_lr: f64,
-    /// Standard deviation in pixels of the Gaussian that low-passes the target images inside
-    /// their masks ([`blur_within_mask`]; 0 = the images as captured).
-    pub image_blur_px: f64,
-}
-
-impl Default for StageConfig {
-    fn default() -> Self {
-        Self {
-            albedo_iterations: 0,
-            shadow_iterations: 0,
-            refine_iterations: 0,
-            pixels_per_view: 256,
-            views_per_frame: 0,
-            rendering_weight: 10.0,
-            colours: ColourSource::Field,
-            appearance_lr: 1e-3,
-            image_blur_px: 2.0,
-        }
-    }
-}
-
-impl StageConfig {
-    /// True when any of stages 2–4 runs.
-    #[must_use]
-    pub fn any(&self) -> bool {
-        self.albedo_iterations + self.shadow_iterations + self.refine_iterations > 0
-    }
-
-    /// The iterations each of stages 2, 3 and 4 runs: the configured counts, less the stages
-    /// that `colours` skips (no AlbedoNet with fixed vertex colours, no ShadowNet without the
-    /// full field).
-    #[must_use]
-    fn scheduled(&self) -> StageProgress {
-        StageProgress {
-            albedo: if self.colours == ColourSource::FixedVertexColours {
-                0
-            } else {
-                self.albedo_iterations
-            },
-            shadow: if self.colours == ColourSource::Field {
-                self.shadow_iterations
-            } else {
-                0
-            },
-            refine: self.refine_iterations,
-        }
-    }
-
-    /// Checks ranges; returns the first bad field.
-    pub fn validate(&self) -> Result<(), &'static str> {
-        if !(self.rendering_weight.is_finite() && self.rendering_weight >= 0.0) {
-            return Err("stages.rendering_weight");
-        }
-        if !(self.appearance_lr.is_finite() && self.appearance_lr > 0.0) {
-            return Err("stages.appearance_lr");
-        }
-        if !(self.image_blur_px.is_finite()
-            && (0.0..=MAX_IMAGE_BLUR_PX).contains(&self.image_blur_px))
-        {
-            return Err("stages.image_blur_px");
-        }
-        Ok(())
-    }
-}
-
-/// Largest accepted [`StageConfig::image_blur_px`] (the blur costs `O(σ)` per pixel).
-pub const MAX_IMAGE_BLUR_PX: f64 = 16.0;
+pub use config::{ColourSource, MAX_IMAGE_BLUR_PX, StageConfig};
 
 /// The colour images of the training frames, `[frame][view]` in [`super::data::train_data`]'s
 /// order (the capture's training frames, its first `options.cameras` cameras), blurred inside
@@ -637,5 +534,6 @@ fn reopen_stage_log(
 }
 
 pub mod checkpoint;
+mod config;
 #[cfg(test)]
 mod tests;
