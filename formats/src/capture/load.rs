@@ -16,14 +16,22 @@ fn check_relative(file: &Path, field: &str, rel: &str) -> Result<(), CaptureErro
     let ok = !rel.is_empty()
         && p.components()
             .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+    ensure(ok, file, field, || {
+        format!("`{rel}` must be a relative path inside the capture")
+    })
+}
+
+/// `Ok` when `ok`, else the error naming `file` and `field` with `message()`.
+fn ensure(
+    ok: bool,
+    file: &Path,
+    field: &str,
+    message: impl FnOnce() -> String,
+) -> Result<(), CaptureError> {
     if ok {
         Ok(())
     } else {
-        Err(CaptureError::invalid(
-            file,
-            field,
-            format!("`{rel}` must be a relative path inside the capture"),
-        ))
+        Err(CaptureError::invalid(file, field, message()))
     }
 }
 
@@ -34,15 +42,9 @@ fn check_name(file: &Path, field: &str, name: &str) -> Result<(), CaptureError> 
         && name
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
-    if ok {
-        Ok(())
-    } else {
-        Err(CaptureError::invalid(
-            file,
-            field,
-            format!("`{name}` is not a name of [A-Za-z0-9_-], 1 to 64 long"),
-        ))
-    }
+    ensure(ok, file, field, || {
+        format!("`{name}` is not a name of [A-Za-z0-9_-], 1 to 64 long")
+    })
 }
 
 fn check_frames(
