@@ -79,31 +79,38 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
 
 #[test]
 fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
-    let tmp = tempfile::tempdir().unwrap();
-    let cap = tmp.path().join("cap");
-    let (code, _, err) = tiny_synth(
-        cap.to_str().unwrap(),
-        "1",
-        &[
-            "--keypoints",
-            "--cameras",
-            "2",
-            "--resolution",
-            "32",
-            "--landmarks",
-            "joint-sides",
-        ],
-    );
-    assert_eq!(code, 0, "{err}");
-    let capture = load_capture(&cap).unwrap();
-    let map = capture.landmark_map().unwrap().unwrap();
-    assert_eq!(
-        map,
-        skinfield_trainer::track::landmarks::joint_side_landmark_map(&capture.skeleton)
-    );
-    let detections = capture.keypoints(0, 0, map.keypoints.len()).unwrap();
-    assert_eq!(detections.len(), map.keypoints.len());
-    assert!(detections.iter().filter(|d| d.is_some()).count() > map.keypoints.len() / 2);
+    use skinfield_trainer::track::landmarks::{joint_ring_landmark_map, joint_side_landmark_map};
+    for set in ["joint-sides", "joint-ring"] {
+        let tmp = tempfile::tempdir().unwrap();
+        let cap = tmp.path().join("cap");
+        let (code, _, err) = tiny_synth(
+            cap.to_str().unwrap(),
+            "1",
+            &[
+                "--keypoints",
+                "--cameras",
+                "2",
+                "--resolution",
+                "32",
+                "--landmarks",
+                set,
+            ],
+        );
+        assert_eq!(code, 0, "{set}: {err}");
+        let capture = load_capture(&cap).unwrap();
+        let map = capture.landmark_map().unwrap().unwrap();
+        let want = match set {
+            "joint-sides" => joint_side_landmark_map(&capture.skeleton),
+            _ => joint_ring_landmark_map(&capture.skeleton, &capture.template),
+        };
+        assert_eq!(map, want, "{set}");
+        let detections = capture.keypoints(0, 0, map.keypoints.len()).unwrap();
+        assert_eq!(detections.len(), map.keypoints.len());
+        assert!(
+            detections.iter().filter(|d| d.is_some()).count() > map.keypoints.len() / 2,
+            "{set}"
+        );
+    }
 }
 
 #[test]
