@@ -114,6 +114,48 @@ fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
 }
 
 #[test]
+fn track_synthesize_writes_the_detections_into_the_copy_and_leaves_the_input_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let c = cap.to_str().unwrap();
+    let (code, _, err) = tiny_synth(c, "1", &["--cameras", "4", "--resolution", "48"]);
+    assert_eq!(code, 0, "{err}");
+    let manifest_before = std::fs::read(cap.join("manifest.json")).unwrap();
+    let tracked = tmp.path().join("tracked");
+    let (code, _, err) = trainer(&[
+        "track",
+        "--capture",
+        c,
+        "--out",
+        tracked.to_str().unwrap(),
+        "--synthesize",
+        "--landmarks",
+        "joint-ring",
+        "--silhouette-weight",
+        "0",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    // The input: no keypoints, the same manifest byte for byte.
+    assert!(!cap.join("keypoints").exists());
+    assert_eq!(
+        std::fs::read(cap.join("manifest.json")).unwrap(),
+        manifest_before
+    );
+    assert!(load_capture(&cap).unwrap().manifest.keypoints.is_none());
+    // The copy: the ring's detections and the tracked motion, close to the input's.
+    let copy = load_capture(&tracked).unwrap();
+    let map = copy.landmark_map().unwrap().unwrap();
+    assert_eq!(map.detector, "joints+ring");
+    let truth = load_capture(&cap).unwrap().poses;
+    for (f, (got, want)) in copy.poses.iter().zip(&truth).enumerate() {
+        let d = got.locals[0]
+            .translation
+            .distance(want.locals[0].translation);
+        assert!(d < 0.1, "frame {f}: root {d} m off");
+    }
+}
+
+#[test]
 fn train_refine_poses_writes_the_corrected_training_motion() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("cap");

@@ -2,7 +2,8 @@
 //! (DeepCap's kinematics and global alignment layers, robust per-frame fit), written as a copy
 //! of the capture whose motion is the tracked one, so `trainer train` runs on it unchanged.
 //! `--synthesize` first writes synthetic detections projected from the capture's own motion
-//! (as `trainer synth --keypoints` does).
+//! (as `trainer synth --keypoints` does) into that copy, and tracks the copy; the input capture
+//! is never written.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -31,7 +32,8 @@ pub struct Args {
     /// motion, plus `track.csv` (per-frame residuals).
     #[arg(long)]
     pub out: PathBuf,
-    /// First write synthetic detections into the input capture, projected from its motion.
+    /// First write synthetic detections, projected from the capture's motion, into the copy
+    /// (`--out`; the input stays as it was), then track them.
     #[arg(long)]
     pub synthesize: bool,
     /// How the synthetic detections are corrupted.
@@ -161,14 +163,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         load_capture(&args.capture)
             .with_context(|| format!("loading the capture {}", args.capture.display()))
     };
-    let mut capture = load()?;
-    if args.synthesize {
-        synthesize_keypoints(&capture, &args.noise)?;
-        capture = load()?;
-    }
+    let input = load()?;
     if args.out.canonicalize().ok() == args.capture.canonicalize().ok() {
         anyhow::bail!("--out must differ from --capture (the input keeps its motion)");
     }
+    // Synthetic detections go into the copy, which is then tracked: the input stays as it was.
+    let capture = if args.synthesize {
+        let skip: Vec<_> = input
+            .manifest
+            .keypoints
+            .iter()
+            .map(|k| input.dir.join(k))
+            .collect();
+        skinfield_trainer::files::copy_tree(&input.dir, &args.out, &skip)?;
+        let reload = || {
+            load_capture(&args.out)
+                .with_context(|| format!("loading the copy {}", args.out.display()))
+        };
+        synthesize_keypoints(&reload()?, &args.noise)?;
+        reload()?
+    } else {
+        input
+    };
     let options = TrackOptions {
         min_confidence: args.min_confidence,
         smooth_weight: args.smooth_weight,
@@ -204,14 +220,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .motion
         .get_or_insert_with(|| "motion.json".into())
         .clone();
-    skinfield_trainer::files::copy_tree(
-        &capture.dir,
-        &args.out,
-        &[
-            capture.dir.join(MANIFEST_FILE),
-            capture.dir.join(&motion_rel),
-        ],
-    )?;
+    if !args.synthesize {
+        skinfield_trainer::files::copy_tree(
+            &capture.dir,
+            &args.out,
+            &[
+                capture.dir.join(MANIFEST_FILE),
+                capture.dir.join(&motion_rel),
+            ],
+        )?;
+    }
     let writer = CaptureWriter::new(&args.out, manifest)?;
     writer.write_motion(&tracked.poses, 30.0)?;
     writer.finish()?;
