@@ -7,6 +7,19 @@ use common::{tiny_synth, trainer};
 use skinfield_formats::capture::load_capture;
 use skinfield_trainer::train::validation::held_out_indices;
 
+/// `trainer track --capture CAPTURE --out OUT EXTRA…`.
+fn track(capture: &str, out: &std::path::Path, extra: &[&str]) -> (i32, String, String) {
+    let mut args = vec![
+        "track",
+        "--capture",
+        capture,
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    trainer(&args)
+}
+
 #[test]
 fn a_capture_without_motion_is_tracked_and_only_then_trained() {
     let tmp = tempfile::tempdir().unwrap();
@@ -50,15 +63,7 @@ fn a_capture_without_motion_is_tracked_and_only_then_trained() {
     assert!(!model.exists());
 
     let tracked = tmp.path().join("tracked");
-    let (code, _, err) = trainer(&[
-        "track",
-        "--capture",
-        c,
-        "--out",
-        tracked.to_str().unwrap(),
-        "--calibration-rounds",
-        "1",
-    ]);
+    let (code, _, err) = track(c, &tracked, &["--calibration-rounds", "1"]);
     assert_eq!(code, 0, "{err}");
     let copy = load_capture(&tracked).unwrap();
     assert!(copy.has_motion());
@@ -122,18 +127,17 @@ fn track_synthesize_writes_the_detections_into_the_copy_and_leaves_the_input_alo
     assert_eq!(code, 0, "{err}");
     let manifest_before = std::fs::read(cap.join("manifest.json")).unwrap();
     let tracked = tmp.path().join("tracked");
-    let (code, _, err) = trainer(&[
-        "track",
-        "--capture",
+    let (code, _, err) = track(
         c,
-        "--out",
-        tracked.to_str().unwrap(),
-        "--synthesize",
-        "--landmarks",
-        "joint-ring",
-        "--silhouette-weight",
-        "0",
-    ]);
+        &tracked,
+        &[
+            "--synthesize",
+            "--landmarks",
+            "joint-ring",
+            "--silhouette-weight",
+            "0",
+        ],
+    );
     assert_eq!(code, 0, "{err}");
     // The input: no keypoints, the same manifest byte for byte.
     assert!(!cap.join("keypoints").exists());
