@@ -10,6 +10,8 @@
 //! answer equals brute force over all triangles (same [`closest_point_on_triangle`], in f32 on
 //! the f32 input, same tie order up to equal distances).
 
+use std::ops::ControlFlow;
+
 use glam::{DVec3, Vec3};
 
 use crate::eval::distance::closest_point_on_triangle;
@@ -203,37 +205,19 @@ impl TriangleBvh {
     /// triangles that have `skip_vertex` as a corner (the segment starts on them).
     #[must_use]
     pub(crate) fn segment_hits(&self, p: DVec3, q: DVec3, t_min: f64, skip_vertex: u32) -> bool {
-        if self.nodes.is_empty() {
-            return false;
-        }
         let d = q - p;
-        let inv = d.recip();
-        let mut stack: Vec<u32> = Vec::with_capacity(64);
-        stack.push(0);
-        while let Some(i) = stack.pop() {
-            let node = self.nodes[i as usize];
-            if !slab_hit(p, inv, node.min, node.max) {
-                continue;
+        let mut hit = false;
+        self.walk_segment(p, q, |t| {
+            if self.triangles[t as usize].contains(&skip_vertex) {
+                return ControlFlow::Continue(1.0);
             }
-            if node.count > 0 {
-                let (s, e) = (
-                    node.start as usize,
-                    node.start as usize + node.count as usize,
-                );
-                for &t in &self.order[s..e] {
-                    if self.triangles[t as usize].contains(&skip_vertex) {
-                        continue;
-                    }
-                    if intersect(p, d, &self.corners(t)).is_some_and(|s| s > t_min && s <= 1.0) {
-                        return true;
-                    }
-                }
-            } else {
-                stack.push(node.start);
-                stack.push(node.right);
+            if intersect(p, d, &self.corners(t)).is_some_and(|s| s > t_min && s <= 1.0) {
+                hit = true;
+                return ControlFlow::Break(());
             }
-        }
-        false
+            ControlFlow::Continue(1.0)
+        });
+        hit
     }
 
     /// The smallest parameter `t ∈ (0, 1]` at which the segment `p → q` crosses a triangle
@@ -241,18 +225,32 @@ impl TriangleBvh {
     /// closed surface leaves it.
     #[must_use]
     pub(crate) fn first_hit(&self, p: DVec3, q: DVec3) -> Option<f64> {
-        if self.nodes.is_empty() {
-            return None;
-        }
         let d = q - p;
-        let inv = d.recip();
         let mut best: Option<f64> = None;
+        self.walk_segment(p, q, |t| {
+            if let Some(s) = intersect(p, d, &self.corners(t)).filter(|&s| s > 0.0 && s <= 1.0) {
+                best = Some(best.map_or(s, |b| b.min(s)));
+            }
+            // A box that the segment up to the best crossing so far misses holds no nearer one.
+            ControlFlow::Continue(best.unwrap_or(1.0))
+        });
+        best
+    }
+
+    /// Calls `visit(triangle)` for every triangle of every leaf whose box the segment
+    /// `p + s (q − p)`, `s ∈ [0, reach]`, meets, where `reach` starts at 1 and is what `visit`
+    /// last returned (boxes beyond it hold nothing the caller still wants); `Break` stops the
+    /// walk.
+    fn walk_segment(&self, p: DVec3, q: DVec3, mut visit: impl FnMut(u32) -> ControlFlow<(), f64>) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let inv = (q - p).recip();
+        let mut reach = 1.0;
         let mut stack: Vec<u32> = Vec::with_capacity(64);
         stack.push(0);
         while let Some(i) = stack.pop() {
             let node = self.nodes[i as usize];
-            // A box that the segment up to the best crossing so far misses holds no nearer one.
-            let reach = best.unwrap_or(1.0);
             if !slab_hit(p, inv * (1.0 / reach), node.min, node.max) {
                 continue;
             }
@@ -262,10 +260,9 @@ impl TriangleBvh {
                     node.start as usize + node.count as usize,
                 );
                 for &t in &self.order[s..e] {
-                    if let Some(s) =
-                        intersect(p, d, &self.corners(t)).filter(|&s| s > 0.0 && s <= 1.0)
-                    {
-                        best = Some(best.map_or(s, |b| b.min(s)));
+                    match visit(t) {
+                        ControlFlow::Continue(r) => reach = r,
+                        ControlFlow::Break(()) => return,
                     }
                 }
             } else {
@@ -273,7 +270,6 @@ impl TriangleBvh {
                 stack.push(node.right);
             }
         }
-        best
     }
 }
 

@@ -159,11 +159,8 @@ fn bones_csv(
 
 /// Runs `trainer track`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let load = || {
-        load_capture(&args.capture)
-            .with_context(|| format!("loading the capture {}", args.capture.display()))
-    };
-    let input = load()?;
+    let input = load_capture(&args.capture)
+        .with_context(|| format!("loading the capture {}", args.capture.display()))?;
     if args.out.canonicalize().ok() == args.capture.canonicalize().ok() {
         anyhow::bail!("--out must differ from --capture (the input keeps its motion)");
     }
