@@ -119,6 +119,40 @@ fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
 }
 
 #[test]
+fn a_bad_filter_setting_is_refused_before_anything_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let c = cap.to_str().unwrap();
+    let (code, _, err) = tiny_synth(c, "1", &["--cameras", "4", "--resolution", "48"]);
+    assert_eq!(code, 0, "{err}");
+    let tracked = tmp.path().join("tracked");
+    for sigma in ["-1", "NaN", "1e9"] {
+        let arg = format!("--filter-sigma={sigma}");
+        let (code, _, err) = track(c, &tracked, &["--synthesize", &arg]);
+        assert_eq!(code, 1, "{sigma}");
+        assert!(err.contains("--filter-sigma"), "{sigma}: {err}");
+        assert!(!tracked.exists(), "{sigma}: the copy was written");
+    }
+    let (code, _, err) = track(
+        c,
+        &tracked,
+        &[
+            "--synthesize",
+            "--filter-sigma",
+            "2",
+            "--filter-clips",
+            "walk,nope",
+        ],
+    );
+    assert_eq!(code, 1);
+    assert!(
+        err.contains("--filter-clips") && err.contains("`nope`"),
+        "{err}"
+    );
+    assert!(!tracked.exists(), "the copy was written");
+}
+
+#[test]
 fn track_synthesize_writes_the_detections_into_the_copy_and_leaves_the_input_alone() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("cap");

@@ -16,6 +16,7 @@ use skinfield_trainer::track::TrackOptions;
 use skinfield_trainer::track::capture::{
     mean_turn_error_deg, mpjpe, track_capture, write_synthetic_keypoints,
 };
+use skinfield_trainer::track::filter::MotionFilter;
 use skinfield_trainer::track::landmarks::{
     default_landmark_map, joint_ring_landmark_map, joint_side_landmark_map,
     joint_surface_landmark_map,
@@ -60,6 +61,19 @@ pub struct Args {
     /// template's bones. Writes `bones.csv` (each joint's offset along its bone).
     #[arg(long, default_value_t = TrackOptions::default().calibration_rounds)]
     pub calibration_rounds: usize,
+    /// Frames the calibration fits, evenly spread (0: every frame); the lengths' noise is
+    /// shared by every frame, so a long noisy capture gains from more.
+    #[arg(long, default_value_t = TrackOptions::default().calibration_frames)]
+    pub calibration_frames: usize,
+    /// σ, in frames, of a zero-phase Gaussian filter over each clip's tracked motion (0: off);
+    /// for video-rate captures, whose neighbouring frames see nearly the same pose with
+    /// independent detection noise, not for sparse frames far apart in time.
+    #[arg(long, default_value_t = TrackOptions::default().filter_sigma_frames)]
+    pub filter_sigma: f64,
+    /// The clips the filter runs on (comma-separated names; default every clip): leave out
+    /// clips whose frames are far apart in time, such as a synthetic capture's held-out phases.
+    #[arg(long, value_delimiter = ',')]
+    pub filter_clips: Vec<String>,
     /// Joints whose local translation is fitted per frame (comma-separated names), for rigs
     /// whose animation translates them, such as inverse-kinematics feet parented to the root.
     #[arg(long, value_delimiter = ',')]
@@ -164,6 +178,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.out.canonicalize().ok() == args.capture.canonicalize().ok() {
         anyhow::bail!("--out must differ from --capture (the input keeps its motion)");
     }
+    // Refused before anything is written (`--synthesize` writes the copy first).
+    MotionFilter::new(args.filter_sigma).context("--filter-sigma")?;
+    if let Some(name) = args
+        .filter_clips
+        .iter()
+        .find(|name| !input.manifest.clips.iter().any(|c| &c.name == *name))
+    {
+        anyhow::bail!("--filter-clips: the capture has no clip `{name}`");
+    }
     // Synthetic detections go into the copy, which is then tracked: the input stays as it was.
     let capture = if args.synthesize {
         let skip: Vec<_> = input
@@ -189,6 +212,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         robust_scale_px: args.robust_px,
         silhouette_weight: args.silhouette_weight,
         calibration_rounds: args.calibration_rounds,
+        calibration_frames: args.calibration_frames,
+        filter_sigma_frames: args.filter_sigma,
+        filter_clips: args.filter_clips.clone(),
         translating_joints: args.translating_joints.clone(),
         ..TrackOptions::default()
     };

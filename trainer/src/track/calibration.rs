@@ -9,7 +9,8 @@
 //! weights that explain it and do not transfer (`docs/experiments/tracking.md`).
 //!
 //! Formulation: the bone lengths (each non-root joint's bind-pose local translation lengthened
-//! or shortened along itself) and the poses of up to [`MAX_CALIBRATION_FRAMES`] frames spread
+//! or shortened along itself) and the poses of up to
+//! [`TrackOptions::calibration_frames`](super::TrackOptions::calibration_frames) frames spread
 //! over the capture minimise together the frames' keypoint losses (confidence- and
 //! robust-weighted reprojection errors, Eq. 6, and the joint-limit prior, Eq. 7; no temporal
 //! term, so the frames are independent given the lengths), plus a weak quadratic prior,
@@ -40,9 +41,10 @@ use glam::{DQuat, DVec3};
 use super::dense::{cholesky_factor, cholesky_substitute, normal_equations};
 use super::solve::{Detection, FrameFit, Observation, TrackError, Tracker};
 
-/// Frames a calibration uses at most (evenly spread): the lengths are shared, and 32 frames of
-/// a dozen views see every bone hundreds of times.
-pub const MAX_CALIBRATION_FRAMES: usize = 32;
+/// Frames a calibration uses at most by default (evenly spread): 32 frames of a dozen views see
+/// every bone hundreds of times, enough from exact detections; with noisy detections the
+/// lengths' error shrinks with more (`docs/experiments/tracking.md`).
+pub const DEFAULT_CALIBRATION_FRAMES: usize = 32;
 /// Weight of the prior that holds each bone's change of length at zero: px² per (1 % of the
 /// skeleton's bind-pose size)². From exact detections of eight frames it pulls a changed
 /// length back by about 0.1 % of the change (1.0 pulled by 0.5–1 %).
@@ -170,12 +172,11 @@ impl Tracker<'_> {
         frames: &[(&[Vec<Option<Detection>>], &FrameFit)],
     ) -> Result<BoneCalibration, TrackError> {
         let start_time = std::time::Instant::now();
-        let picked: Vec<usize> = if frames.len() <= MAX_CALIBRATION_FRAMES {
+        let wanted = self.options.calibration_frames;
+        let picked: Vec<usize> = if wanted == 0 || frames.len() <= wanted {
             (0..frames.len()).collect()
         } else {
-            (0..MAX_CALIBRATION_FRAMES)
-                .map(|i| i * frames.len() / MAX_CALIBRATION_FRAMES)
-                .collect()
+            (0..wanted).map(|i| i * frames.len() / wanted).collect()
         };
         let mut data = Vec::with_capacity(picked.len());
         for &i in &picked {

@@ -7,6 +7,7 @@ use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
 use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
 
 use super::calibration::BoneCalibration;
+use super::filter::{FilterError, MotionFilter};
 use super::kinematics::{Kinematics, Landmark};
 use super::landmarks::landmarks_of;
 use super::mirror::left_right_pairs;
@@ -41,6 +42,12 @@ pub enum CaptureTrackError {
     /// The skeleton calibration failed.
     #[error("skeleton calibration: {0}")]
     Calibration(TrackError),
+    /// The temporal filter's setting (or the motion it was given) was refused.
+    #[error("temporal filter: {0}")]
+    Filter(#[from] FilterError),
+    /// A clip named for the temporal filter is not in the manifest.
+    #[error("temporal filter: the manifest has no clip `{0}` (field `clips`)")]
+    FilterClip(String),
     /// A pose did not fit the skeleton.
     #[error(transparent)]
     Skeleton(#[from] SkeletonError),
@@ -120,9 +127,9 @@ pub fn write_synthetic_keypoints(
 /// One tracked capture.
 #[derive(Clone, Debug)]
 pub struct TrackedMotion {
-    /// One pose per frame.
+    /// One pose per frame (after the temporal filter, [`TrackOptions::filter_sigma_frames`]).
     pub poses: Vec<Pose>,
-    /// The fit of every frame.
+    /// The fit of every frame (before the filter: its residuals are the fit's own).
     pub fits: Vec<FrameFit>,
     /// The last skeleton calibration ([`TrackOptions::calibration_rounds`]); its offsets are in
     /// the poses' local translations. `None` without calibration.
@@ -136,14 +143,24 @@ pub struct TrackedMotion {
 /// template skinned with `body_skin` (one row per template vertex), or with the capture's
 /// initial weights (bone heat when it ships none) when `None`. A body closer to the truth
 /// biases the outline fit less (the true weights do, on CesiumMan); static weights learned from
-/// a first pass's motion did not (`docs/experiments/tracking.md`). `progress` is called after
-/// each frame of the final fit.
+/// a first pass's motion did not (`docs/experiments/tracking.md`). With
+/// [`TrackOptions::filter_sigma_frames`], each clip's poses are then filtered over time
+/// ([`super::filter`]). `progress` is called after each frame of the final fit.
 pub fn track_capture(
     capture: &Capture,
     options: &TrackOptions,
     body_skin: Option<&StaticSkin>,
     mut progress: impl FnMut(usize),
 ) -> Result<TrackedMotion, CaptureTrackError> {
+    let filter = MotionFilter::new(options.filter_sigma_frames)?;
+    let clips = &capture.manifest.clips;
+    if let Some(name) = options
+        .filter_clips
+        .iter()
+        .find(|name| !clips.iter().any(|c| &c.name == *name))
+    {
+        return Err(CaptureTrackError::FilterClip(name.clone()));
+    }
     let map = capture
         .landmark_map()?
         .ok_or(CaptureTrackError::NoKeypoints)?;
@@ -232,7 +249,13 @@ pub fn track_capture(
                 &fit.angles,
             )
         })
-        .collect::<Result<_, _>>()?;
+        .collect::<Result<Vec<_>, _>>()?;
+    let runs: Vec<_> = clips
+        .iter()
+        .filter(|c| options.filter_clips.is_empty() || options.filter_clips.contains(&c.name))
+        .map(|c| c.first..c.first + c.count)
+        .collect();
+    let poses = filter.apply(&poses, &runs)?;
     Ok(TrackedMotion {
         poses,
         fits,

@@ -9,6 +9,7 @@
 //! - [`silhouette`]: the optional silhouette refinement on the skinned template;
 //! - [`landmarks`]: which point of the skeleton each keypoint of a detector sees;
 //! - [`capture`]: synthetic keypoints in a capture, tracking all its frames;
+//! - [`filter`]: a zero-phase Gaussian filter of the tracked motion over each clip;
 //! - [`mirror`]: the left/right pairs of a detector's keypoints (by name, else by the bind
 //!   pose's symmetry), which a synthetic swap exchanges;
 //! - [`synthetic`]: detections projected from known landmarks, with noise, drops and swaps.
@@ -17,6 +18,7 @@ pub mod alignment;
 pub mod calibration;
 pub mod capture;
 mod dense;
+pub mod filter;
 pub mod kinematics;
 pub mod landmarks;
 pub mod mirror;
