@@ -455,6 +455,62 @@ pub(super) mod tests {
     }
 
     #[test]
+    fn the_temporal_filter_runs_on_the_named_clips_only() {
+        // Three frames per training clip, so that a clip has a frame with neighbours.
+        let dir = tempfile::tempdir().unwrap();
+        let config = crate::synth::SynthConfig {
+            cameras: 4,
+            width: 96,
+            height: 96,
+            train_frames_per_clip: 3,
+            ..crate::synth::SynthConfig::tiny()
+        };
+        crate::synth::synthesize(dir.path(), &config).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
+            .unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        let keypoints_only = TrackOptions {
+            silhouette_weight: 0.0,
+            ..TrackOptions::default()
+        };
+        let raw = track_capture(&capture, &keypoints_only, None, |_| {}).unwrap();
+        let clip = capture
+            .manifest
+            .clips
+            .iter()
+            .find(|c| c.count > 2)
+            .unwrap()
+            .clone();
+        let filtered_options = TrackOptions {
+            filter_sigma_frames: 1.0,
+            filter_clips: vec![clip.name.clone()],
+            ..keypoints_only.clone()
+        };
+        let filtered = track_capture(&capture, &filtered_options, None, |_| {}).unwrap();
+        // Exactly the filter of the raw motion over that clip, every other frame as fitted.
+        let range = clip.first..clip.first + clip.count;
+        let expected = MotionFilter::new(1.0)
+            .unwrap()
+            .apply(&raw.poses, std::slice::from_ref(&range))
+            .unwrap();
+        assert_eq!(filtered.poses, expected);
+        assert_eq!(filtered.fits, raw.fits);
+        assert!(range.clone().any(|f| filtered.poses[f] != raw.poses[f]));
+        for f in (0..capture.frame_count()).filter(|f| !range.contains(f)) {
+            assert_eq!(filtered.poses[f], raw.poses[f], "frame {f}");
+        }
+        let unknown = TrackOptions {
+            filter_clips: vec!["no such clip".into()],
+            ..filtered_options
+        };
+        assert!(matches!(
+            track_capture(&capture, &unknown, None, |_| {}),
+            Err(CaptureTrackError::FilterClip(name)) if name == "no such clip"
+        ));
+    }
+
+    #[test]
     fn the_silhouette_refinement_explains_the_masks_and_keeps_an_exact_fit() {
         let dir = tempfile::tempdir().unwrap();
         let capture = exact_keypoint_capture(dir.path());
