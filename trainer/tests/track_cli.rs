@@ -118,13 +118,23 @@ fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
     }
 }
 
+/// A tiny built-in capture of 4 cameras at 48² in `DIR/cap`, without keypoints.
+fn four_camera_capture(dir: &std::path::Path) -> std::path::PathBuf {
+    let cap = dir.join("cap");
+    let (code, _, err) = tiny_synth(
+        cap.to_str().unwrap(),
+        "1",
+        &["--cameras", "4", "--resolution", "48"],
+    );
+    assert_eq!(code, 0, "{err}");
+    cap
+}
+
 #[test]
 fn a_bad_filter_setting_is_refused_before_anything_is_written() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = tmp.path().join("cap");
+    let cap = four_camera_capture(tmp.path());
     let c = cap.to_str().unwrap();
-    let (code, _, err) = tiny_synth(c, "1", &["--cameras", "4", "--resolution", "48"]);
-    assert_eq!(code, 0, "{err}");
     let tracked = tmp.path().join("tracked");
     for sigma in ["-1", "NaN", "1e9"] {
         let arg = format!("--filter-sigma={sigma}");
@@ -155,10 +165,8 @@ fn a_bad_filter_setting_is_refused_before_anything_is_written() {
 #[test]
 fn track_synthesize_writes_the_detections_into_the_copy_and_leaves_the_input_alone() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = tmp.path().join("cap");
+    let cap = four_camera_capture(tmp.path());
     let c = cap.to_str().unwrap();
-    let (code, _, err) = tiny_synth(c, "1", &["--cameras", "4", "--resolution", "48"]);
-    assert_eq!(code, 0, "{err}");
     let manifest_before = std::fs::read(cap.join("manifest.json")).unwrap();
     let tracked = tmp.path().join("tracked");
     let (code, _, err) = track(

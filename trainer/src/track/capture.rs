@@ -372,24 +372,35 @@ pub(super) mod tests {
         seed: 0,
     };
 
-    /// A tiny synthetic capture (4 cameras at 96²) in `dir`, without keypoints.
+    /// A tiny synthetic capture (4 cameras at 96², one frame per clip) in `dir`, without
+    /// keypoints.
     pub(in crate::track) fn tiny_capture(dir: &std::path::Path) -> Capture {
+        tiny_capture_with_frames(dir, 1)
+    }
+
+    /// [`tiny_capture`] with `train_frames` frames per training clip.
+    fn tiny_capture_with_frames(dir: &std::path::Path, train_frames: usize) -> Capture {
         let config = crate::synth::SynthConfig {
             cameras: 4,
             width: 96,
             height: 96,
+            train_frames_per_clip: train_frames,
             ..crate::synth::SynthConfig::tiny()
         };
         crate::synth::synthesize(dir, &config).unwrap();
         load_capture(dir).unwrap()
     }
 
-    /// [`tiny_capture`] with exact keypoints of its default landmark map written into it.
-    fn exact_keypoint_capture(dir: &std::path::Path) -> Capture {
-        let capture = tiny_capture(dir);
-        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
+    /// `capture` (in `dir`) with exact keypoints of its default landmark map written into it.
+    fn with_exact_keypoints(dir: &std::path::Path, capture: &Capture) -> Capture {
+        write_synthetic_keypoints(capture, &default_landmark_map(&capture.skeleton), &EXACT)
             .unwrap();
         load_capture(dir).unwrap()
+    }
+
+    /// [`tiny_capture`] with exact keypoints of its default landmark map written into it.
+    fn exact_keypoint_capture(dir: &std::path::Path) -> Capture {
+        with_exact_keypoints(dir, &tiny_capture(dir))
     }
 
     #[test]
@@ -458,18 +469,7 @@ pub(super) mod tests {
     fn the_temporal_filter_runs_on_the_named_clips_only() {
         // Three frames per training clip, so that a clip has a frame with neighbours.
         let dir = tempfile::tempdir().unwrap();
-        let config = crate::synth::SynthConfig {
-            cameras: 4,
-            width: 96,
-            height: 96,
-            train_frames_per_clip: 3,
-            ..crate::synth::SynthConfig::tiny()
-        };
-        crate::synth::synthesize(dir.path(), &config).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
-        write_synthetic_keypoints(&capture, &default_landmark_map(&capture.skeleton), &EXACT)
-            .unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let capture = with_exact_keypoints(dir.path(), &tiny_capture_with_frames(dir.path(), 3));
         let keypoints_only = TrackOptions {
             silhouette_weight: 0.0,
             ..TrackOptions::default()

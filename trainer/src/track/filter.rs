@@ -213,6 +213,17 @@ mod tests {
         }
     }
 
+    /// Filtering `poses` as one clip with σ = `sigma` leaves every frame within `tolerance`.
+    fn assert_passes_unchanged(poses: &[Pose], sigma: f64, tolerance: f32) {
+        let out = MotionFilter::new(sigma)
+            .unwrap()
+            .apply(poses, &[0..poses.len()])
+            .unwrap();
+        for (a, b) in out.iter().zip(poses) {
+            assert_close(a, b, tolerance);
+        }
+    }
+
     #[test]
     fn a_constant_motion_is_unchanged_whatever_the_quaternions_signs() {
         let q = Quat::from_axis_angle(Vec3::new(0.3, -0.8, 0.5).normalize(), 0.7);
@@ -222,13 +233,7 @@ mod tests {
                 pose(&[signed, Quat::IDENTITY], Vec3::new(0.1, 0.9, -0.2))
             })
             .collect();
-        let out = MotionFilter::new(2.0)
-            .unwrap()
-            .apply(&poses, &[0..20])
-            .unwrap();
-        for (a, b) in out.iter().zip(&poses) {
-            assert_close(a, b, 1e-6);
-        }
+        assert_passes_unchanged(&poses, 2.0, 1e-6);
     }
 
     #[test]
@@ -247,13 +252,7 @@ mod tests {
                 )
             })
             .collect();
-        let out = MotionFilter::new(3.0)
-            .unwrap()
-            .apply(&poses, &[0..30])
-            .unwrap();
-        for (a, b) in out.iter().zip(&poses) {
-            assert_close(a, b, 2e-6);
-        }
+        assert_passes_unchanged(&poses, 3.0, 2e-6);
     }
 
     #[test]

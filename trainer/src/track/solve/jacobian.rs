@@ -280,7 +280,6 @@ mod tests {
     use glam::{DQuat, DVec3};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use skinfield_formats::capture::load_capture;
 
     use super::super::{
         FrameFit, FrameReport, Problem, SilhouetteTerm, TrackOptions, Tracker, Workspace,
@@ -307,14 +306,7 @@ mod tests {
     #[test]
     fn the_chain_rule_jacobian_matches_central_differences() {
         let dir = tempfile::tempdir().unwrap();
-        let config = crate::synth::SynthConfig {
-            cameras: 4,
-            width: 96,
-            height: 96,
-            ..crate::synth::SynthConfig::tiny()
-        };
-        crate::synth::synthesize(dir.path(), &config).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let capture = crate::track::capture::tests::tiny_capture(dir.path());
         let skeleton = &capture.skeleton;
         let cameras = &capture.rig.cameras;
         let frame = 3;
