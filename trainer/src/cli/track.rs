@@ -14,9 +14,8 @@ use skinfield_formats::capture::{Capture, CaptureWriter, MANIFEST_FILE, load_cap
 use skinfield_trainer::eval::{PreparedSkinning, Skinning};
 use skinfield_trainer::track::TrackOptions;
 use skinfield_trainer::track::capture::{
-    mean_turn_error_deg, mpjpe, track_capture, write_synthetic_keypoints,
+    mean_turn_error_deg, mpjpe, temporal_filter, track_capture, write_synthetic_keypoints,
 };
-use skinfield_trainer::track::filter::MotionFilter;
 use skinfield_trainer::track::landmarks::{
     default_landmark_map, joint_ring_landmark_map, joint_side_landmark_map,
     joint_surface_landmark_map,
@@ -178,15 +177,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.out.canonicalize().ok() == args.capture.canonicalize().ok() {
         anyhow::bail!("--out must differ from --capture (the input keeps its motion)");
     }
+    let options = TrackOptions {
+        min_confidence: args.min_confidence,
+        smooth_weight: args.smooth_weight,
+        limit_weight: args.limit_weight,
+        robust_scale_px: args.robust_px,
+        silhouette_weight: args.silhouette_weight,
+        calibration_rounds: args.calibration_rounds,
+        calibration_frames: args.calibration_frames,
+        filter_sigma_frames: args.filter_sigma,
+        filter_clips: args.filter_clips.clone(),
+        translating_joints: args.translating_joints.clone(),
+        ..TrackOptions::default()
+    };
     // Refused before anything is written (`--synthesize` writes the copy first).
-    MotionFilter::new(args.filter_sigma).context("--filter-sigma")?;
-    if let Some(name) = args
-        .filter_clips
-        .iter()
-        .find(|name| !input.manifest.clips.iter().any(|c| &c.name == *name))
-    {
-        anyhow::bail!("--filter-clips: the capture has no clip `{name}`");
-    }
+    temporal_filter(&options, &input.manifest.clips).context("--filter-sigma / --filter-clips")?;
     // Synthetic detections go into the copy, which is then tracked: the input stays as it was.
     let capture = if args.synthesize {
         let skip: Vec<_> = input
@@ -204,19 +209,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         reload()?
     } else {
         input
-    };
-    let options = TrackOptions {
-        min_confidence: args.min_confidence,
-        smooth_weight: args.smooth_weight,
-        limit_weight: args.limit_weight,
-        robust_scale_px: args.robust_px,
-        silhouette_weight: args.silhouette_weight,
-        calibration_rounds: args.calibration_rounds,
-        calibration_frames: args.calibration_frames,
-        filter_sigma_frames: args.filter_sigma,
-        filter_clips: args.filter_clips.clone(),
-        translating_joints: args.translating_joints.clone(),
-        ..TrackOptions::default()
     };
     let body_skin = match &args.body_weights {
         Skinning::Initial => None,

@@ -1,9 +1,11 @@
 //! Tracking a capture on disk: synthetic keypoints written into a capture, and the
 //! frame-by-frame tracking of all its frames.
 
+use std::ops::Range;
+
 use glam::{DVec3, Mat4};
 use skinfield_formats::capture::keypoints::{Keypoint2d, LandmarkMapFile};
-use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter};
+use skinfield_formats::capture::{Capture, CaptureError, CaptureWriter, ClipEntry};
 use skinfield_formats::{Pose, Skeleton, SkeletonError, StaticSkin};
 
 use super::calibration::BoneCalibration;
@@ -152,15 +154,7 @@ pub fn track_capture(
     body_skin: Option<&StaticSkin>,
     mut progress: impl FnMut(usize),
 ) -> Result<TrackedMotion, CaptureTrackError> {
-    let filter = MotionFilter::new(options.filter_sigma_frames)?;
-    let clips = &capture.manifest.clips;
-    if let Some(name) = options
-        .filter_clips
-        .iter()
-        .find(|name| !clips.iter().any(|c| &c.name == *name))
-    {
-        return Err(CaptureTrackError::FilterClip(name.clone()));
-    }
+    let (filter, runs) = temporal_filter(options, &capture.manifest.clips)?;
     let map = capture
         .landmark_map()?
         .ok_or(CaptureTrackError::NoKeypoints)?;
@@ -250,17 +244,39 @@ pub fn track_capture(
             )
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let runs: Vec<_> = clips
-        .iter()
-        .filter(|c| options.filter_clips.is_empty() || options.filter_clips.contains(&c.name))
-        .map(|c| c.first..c.first + c.count)
-        .collect();
     let poses = filter.apply(&poses, &runs)?;
     Ok(TrackedMotion {
         poses,
         fits,
         calibration,
     })
+}
+
+/// The temporal filter of `options` ([`TrackOptions::filter_sigma_frames`]) and the frame runs
+/// it filters: the clips of `clips` named in [`TrackOptions::filter_clips`], or every clip when
+/// it names none. A caller that writes files first can check the settings with it beforehand.
+///
+/// # Errors
+/// [`CaptureTrackError::Filter`] for a bad σ, [`CaptureTrackError::FilterClip`] for a name that
+/// is not a clip of `clips`.
+pub fn temporal_filter(
+    options: &TrackOptions,
+    clips: &[ClipEntry],
+) -> Result<(MotionFilter, Vec<Range<usize>>), CaptureTrackError> {
+    let filter = MotionFilter::new(options.filter_sigma_frames)?;
+    if let Some(name) = options
+        .filter_clips
+        .iter()
+        .find(|name| !clips.iter().any(|c| &c.name == *name))
+    {
+        return Err(CaptureTrackError::FilterClip(name.clone()));
+    }
+    let runs = clips
+        .iter()
+        .filter(|c| options.filter_clips.is_empty() || options.filter_clips.contains(&c.name))
+        .map(|c| c.first..c.first + c.count)
+        .collect();
+    Ok((filter, runs))
 }
 
 /// Fits every frame of `capture` in order with `tracker` (each frame from its clip's previous

@@ -135,9 +135,10 @@ impl MotionFilter {
                     (-0.5 * k * k / (self.sigma_frames * self.sigma_frames)).exp()
                 }));
                 let total: f64 = weights.iter().sum();
+                weights.iter_mut().for_each(|w| *w /= total);
                 let window = &poses[t - radius..=t + radius];
                 for (j, local) in out[t].locals.iter_mut().enumerate() {
-                    *local = mean_transform(window, j, &weights, total, &poses[t].locals[j]);
+                    *local = mean_transform(window, j, &weights, &poses[t].locals[j]);
                 }
             }
         }
@@ -145,15 +146,9 @@ impl MotionFilter {
     }
 }
 
-/// The weighted mean of joint `j`'s local transform over `window` (`weights` sum to `total`),
+/// The weighted mean of joint `j`'s local transform over `window` (`weights` sum to 1),
 /// rotations signed towards `centre`'s.
-fn mean_transform(
-    window: &[Pose],
-    j: usize,
-    weights: &[f64],
-    total: f64,
-    centre: &Transform,
-) -> Transform {
+fn mean_transform(window: &[Pose], j: usize, weights: &[f64], centre: &Transform) -> Transform {
     let c = centre.rotation.as_dquat();
     let (mut q, mut translation, mut scale) = (
         DQuat::from_xyzw(0.0, 0.0, 0.0, 0.0),
@@ -164,9 +159,9 @@ fn mean_transform(
         let local = &pose.locals[j];
         let r = local.rotation.as_dquat();
         let signed = if r.dot(c) < 0.0 { -r } else { r };
-        q += signed * (w / total);
-        translation += local.translation.as_dvec3() * (w / total);
-        scale += local.scale.as_dvec3() * (w / total);
+        q += signed * w;
+        translation += local.translation.as_dvec3() * w;
+        scale += local.scale.as_dvec3() * w;
     }
     // The signed sum has the centre's own weight along `c`, so it cannot vanish for windows
     // of unit quaternions within a half turn of the centre; a degenerate one keeps the centre.
