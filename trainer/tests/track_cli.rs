@@ -160,6 +160,43 @@ fn a_bad_filter_setting_is_refused_before_anything_is_written() {
         "{err}"
     );
     assert!(!tracked.exists(), "the copy was written");
+    for fps in ["0", "-24", "NaN"] {
+        let arg = format!("--fps={fps}");
+        let (code, _, err) = track(c, &tracked, &["--synthesize", &arg]);
+        assert_eq!(code, 1, "{fps}");
+        assert!(err.contains("--fps"), "{fps}: {err}");
+        assert!(!tracked.exists(), "{fps}: the copy was written");
+    }
+}
+
+/// The `fps` of a capture's `motion.json`.
+fn motion_fps(capture: &std::path::Path) -> f64 {
+    let motion: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(capture.join("motion.json")).unwrap()).unwrap();
+    motion["fps"].as_f64().unwrap()
+}
+
+#[test]
+fn the_tracked_motion_keeps_the_input_frame_rate_unless_told_otherwise() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = four_camera_capture(tmp.path());
+    // A video at 80 frames per second.
+    let path = cap.join("motion.json");
+    let mut motion: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    motion["fps"] = 80.0.into();
+    std::fs::write(&path, serde_json::to_vec(&motion).unwrap()).unwrap();
+    let c = cap.to_str().unwrap();
+    let fast = ["--synthesize", "--silhouette-weight", "0"];
+    let kept = tmp.path().join("kept");
+    let (code, out, err) = track(c, &kept, &fast);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(motion_fps(&kept), 80.0);
+    assert!(out.contains("at 80 fps"), "{out}");
+    let told = tmp.path().join("told");
+    let (code, _, err) = track(c, &told, &[&fast[..], &["--fps", "24"]].concat());
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(motion_fps(&told), 24.0);
 }
 
 #[test]

@@ -205,8 +205,15 @@ pub fn transform_to_array(t: &Transform) -> [f32; 10] {
 
 impl MotionFile {
     /// One pose per frame, each checked against the skeleton (joint count, finite, unit
-    /// quaternions within 1e-3).
+    /// quaternions within 1e-3); the frame rate must be finite and positive.
     pub fn to_poses(&self, file: &Path, skeleton: &Skeleton) -> Result<Vec<Pose>, CaptureError> {
+        if !(self.fps.is_finite() && self.fps > 0.0) {
+            return Err(CaptureError::invalid(
+                file,
+                "fps",
+                format!("{} is not a positive frame rate", self.fps),
+            ));
+        }
         if self.frames.len() > MAX_FRAMES {
             return Err(CaptureError::invalid(file, "frames", "too many frames"));
         }

@@ -209,7 +209,7 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
         None => None,
     };
 
-    let poses = match &m.motion {
+    let (poses, motion_fps) = match &m.motion {
         Some(rel) => {
             let motion_file = dir.join(rel);
             let motion: MotionFile = read_json(&motion_file)?;
@@ -225,9 +225,9 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
                     ),
                 ));
             }
-            poses
+            (poses, Some(motion.fps))
         }
-        None => vec![skeleton.bind_pose(); m.frame_count],
+        None => (vec![skeleton.bind_pose(); m.frame_count], None),
     };
 
     let capture = Capture {
@@ -240,6 +240,7 @@ pub fn load_capture(dir: impl AsRef<Path>) -> Result<Capture, CaptureError> {
         up_axis,
         initial_weights,
         poses,
+        motion_fps,
         manifest,
     };
     // Every image and mask must exist; reading them stays lazy.

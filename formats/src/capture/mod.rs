@@ -158,6 +158,9 @@ pub struct Capture {
     /// One pose per frame; the bind pose throughout when the capture has no motion yet
     /// ([`Capture::require_motion`]).
     pub poses: Vec<Pose>,
+    /// The motion file's frame rate (frames per second); `None` when the capture has no motion
+    /// file yet. Kept so that tools that rewrite the motion (`trainer track`) keep it.
+    pub motion_fps: Option<f32>,
     /// Training frame indices.
     pub train_frames: Vec<usize>,
     /// Test frame indices (disjoint from the training frames).

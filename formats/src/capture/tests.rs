@@ -343,6 +343,18 @@ fn errors_name_the_file_and_field() {
             Box::new(|v| v["frames"][2][0][6] = 3.0.into()),
         ),
         (
+            "motion.json",
+            "motion.json",
+            "fps",
+            Box::new(|v| v["fps"] = 0.0.into()),
+        ),
+        (
+            "motion.json",
+            "motion.json",
+            "fps",
+            Box::new(|v| v["fps"] = (-24.0).into()),
+        ),
+        (
             "initial_weights.json",
             "initial_weights.json",
             "offsets",
@@ -367,13 +379,16 @@ fn errors_name_the_file_and_field() {
 fn a_capture_without_motion_loads_in_the_bind_pose_and_says_so() {
     let tmp = tempfile::tempdir().unwrap();
     write_capture(tmp.path(), ImageFormat::Png);
-    assert!(load_capture(tmp.path()).unwrap().require_motion().is_ok());
+    let with_motion = load_capture(tmp.path()).unwrap();
+    assert!(with_motion.require_motion().is_ok());
+    assert_eq!(with_motion.motion_fps, Some(30.0));
     edit_json(&tmp.path().join("manifest.json"), |v| {
         v.as_object_mut().unwrap().remove("motion");
     });
     std::fs::remove_file(tmp.path().join("motion.json")).unwrap();
     let c = load_capture(tmp.path()).unwrap();
     assert!(!c.has_motion());
+    assert_eq!(c.motion_fps, None);
     assert_eq!(c.poses, vec![c.skeleton.bind_pose(); 3]);
     match c.require_motion() {
         Err(CaptureError::Invalid { field, reason, .. }) => {

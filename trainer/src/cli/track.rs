@@ -82,7 +82,14 @@ pub struct Args {
     /// `oracle` (the capture's true weights; a ceiling for experiments).
     #[arg(long, default_value = "initial")]
     pub body_weights: Skinning,
+    /// Frame rate recorded with the tracked motion (frames per second); default: the input
+    /// motion's, or 30 for a capture without motion.
+    #[arg(long)]
+    pub fps: Option<f32>,
 }
+
+/// The frame rate `trainer track` records when neither `--fps` nor the input's motion gives one.
+pub const DEFAULT_TRACK_FPS: f32 = 30.0;
 
 /// The synthetic detector (`trainer track --synthesize`, `trainer synth --keypoints`): the
 /// points it sees and how its detections are corrupted.
@@ -191,6 +198,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..TrackOptions::default()
     };
     // Refused before anything is written (`--synthesize` writes the copy first).
+    let fps = args.fps.or(input.motion_fps).unwrap_or(DEFAULT_TRACK_FPS);
+    if !(fps.is_finite() && fps > 0.0) {
+        anyhow::bail!("--fps {fps} is not a positive frame rate");
+    }
     temporal_filter(&options, &input.manifest.clips).context("--filter-sigma / --filter-clips")?;
     // Synthetic detections go into the copy, which is then tracked: the input stays as it was.
     let capture = if args.synthesize {
@@ -246,7 +257,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )?;
     }
     let writer = CaptureWriter::new(&args.out, manifest)?;
-    writer.write_motion(&tracked.poses, 30.0)?;
+    writer.write_motion(&tracked.poses, fps)?;
     writer.finish()?;
 
     // Against the input's motion, when it has one (a synthetic capture's ground truth).
@@ -302,11 +313,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     writeln!(
         out,
-        "tracked {} frames in {seconds:.1} s → {} (per-frame residuals: {})",
+        "tracked {} frames in {seconds:.1} s → {} at {fps} fps (per-frame residuals of the fit: \
+         {})",
         tracked.poses.len(),
         args.out.display(),
         csv_path.display()
     )?;
+    if options.filter_sigma_frames > 0.0 {
+        let clips = if options.filter_clips.is_empty() {
+            "every clip".to_owned()
+        } else {
+            options.filter_clips.join(", ")
+        };
+        writeln!(
+            out,
+            "then filtered over time: a zero-phase Gaussian of σ = {} frames on {clips}",
+            options.filter_sigma_frames
+        )?;
+    }
     if let Some((errors, turns)) = &errors {
         let mean = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
         let worst = errors.iter().copied().fold(0.0, f64::max);
