@@ -1,6 +1,7 @@
 //! `trainer train` with an ensemble: every member trained in its own folder, the student
 //! distilled from them and exported, a finished run resumed to the same bytes, and an ensemble
-//! with pose refinement refused before anything trains.
+//! with pose refinement refused before anything trains; stage 4 moved to the full-resolution
+//! template.
 
 mod common;
 
@@ -60,4 +61,52 @@ fn an_ensemble_trains_its_members_then_distils_one_model() {
     assert_ne!(code, 0);
     assert!(err.contains("ensemble.members"), "{err}");
     assert!(!model.exists());
+}
+
+/// With `stages.full_resolution` stage 1 trains on the simplified template and stage 4 on the
+/// full one: the exported model's candidate anchors (one per training vertex) are the full
+/// template's vertices, and without it the simplified template's.
+#[test]
+fn stage_four_moves_to_the_full_resolution_template() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = tmp.path().join("cap");
+    let c = cap.to_str().unwrap();
+    let (code, _, err) = tiny_synth(c, "2", &["--cameras", "4", "--resolution", "48"]);
+    assert_eq!(code, 0, "{err}");
+    let full = skinfield_formats::capture::load_capture(&cap)
+        .unwrap()
+        .template
+        .vertex_count();
+    let anchors = |full_resolution: bool| {
+        let config = tmp.path().join(format!("c{full_resolution}.json"));
+        std::fs::write(
+            &config,
+            format!(
+                r#"{{"iterations": 4, "warm_start_iterations": 4, "validation_every": 2,
+                    "stages": {{"refine_iterations": 2, "rendering_weight": 0,
+                                "full_resolution": {full_resolution}}}}}"#
+            ),
+        )
+        .unwrap();
+        let model = tmp.path().join(format!("m{full_resolution}.skf"));
+        let (code, _, err) = common::train(
+            c,
+            model.to_str().unwrap(),
+            config.to_str().unwrap(),
+            &["--train-vertices", "600"],
+        );
+        assert_eq!(code, 0, "{err}");
+        let bytes = std::fs::read(&model).unwrap();
+        let view = skinfield_formats::skf::SkfView::parse(&bytes).unwrap();
+        let stages = std::fs::read_to_string(
+            tmp.path()
+                .join(format!("m{full_resolution}.skf.work/stages.csv")),
+        )
+        .unwrap();
+        assert_eq!(stages.lines().filter(|l| l.starts_with("4,")).count(), 2);
+        view.candidates().map_or(0, |c| c.len())
+    };
+    let (coarse, fine) = (anchors(false), anchors(true));
+    assert!(coarse < full * 2 / 5, "{coarse} of {full}");
+    assert_eq!(fine, full);
 }

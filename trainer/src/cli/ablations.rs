@@ -27,7 +27,7 @@ use skinfield_trainer::train::data::{DataOptions, TrainData, train_data};
 use skinfield_trainer::train::stages::{ColourSource, StageConfig, load_images};
 use skinfield_trainer::train::{LossWeights, TrainConfig, Trainer};
 
-use super::train::train_static;
+use super::train::{for_stages, train_static};
 
 /// The row every other is compared with: all four stages, every camera.
 pub const FULL_METHOD: &str = "ours";
@@ -116,6 +116,7 @@ pub fn run(
         views_per_frame: args.views_per_frame,
         rendering_weight: args.rendering_weight,
         image_blur_px: args.image_blur_px,
+        full_resolution: base.stages.full_resolution,
         ..StageConfig::default()
     };
     let variants = [
@@ -202,6 +203,7 @@ pub fn run(
             trainer.resume(&stage1_dir.join("checkpoint.safetensors"))?;
             trainer.run(&dir, progress)?;
             trainer.adopt_average()?;
+            let mut trainer = for_stages(trainer, capture, initial, &options)?;
             let appearance = if v.stages.any() {
                 Some(trainer.run_stages(images.clone(), &dir, progress)?)
             } else {
@@ -210,10 +212,9 @@ pub fn run(
             trainer.adopt_average()?;
             let mut model = trainer.skf_model()?;
             // Untrained appearance nets (fixed colours, or no rendering) are not stored.
-            if let Some(a) = appearance.filter(|_| {
-                v.stages.colours != ColourSource::FixedVertexColours
-                    && v.stages.rendering_weight > 0.0
-            }) {
+            if let Some(a) =
+                appearance.filter(|_| v.stages.learns_albedo() && v.stages.rendering_weight > 0.0)
+            {
                 a.push_to_skf(&mut model)?;
             }
             let path = dir.join("model.skf");

@@ -13,7 +13,7 @@ use skinfield_trainer::train::data::{
     DataOptions, TrainData, initial_weights, static_train_data, train_data,
 };
 use skinfield_trainer::train::plot::plot_log;
-use skinfield_trainer::train::stages::{ColourSource, load_images};
+use skinfield_trainer::train::stages::load_images;
 use skinfield_trainer::train::validation::held_out_indices;
 use skinfield_trainer::train::{TrainConfig, Trainer};
 
@@ -149,9 +149,14 @@ pub fn train_skinnet(
     };
     // The average of stage 1's iterates is the model; stages 2–4 continue from it.
     trainer.adopt_average()?;
+    let mut trainer = for_stages(trainer, capture, initial, options)?;
     let stages = trainer.config().stages;
     let appearance = if stages.any() {
-        let images = load_images(capture, options, stages.image_blur_px)?;
+        let images = if stages.renders() {
+            load_images(capture, options, stages.image_blur_px)?
+        } else {
+            Vec::new()
+        };
         Some(if resume {
             trainer.resume_stages(images, work, progress)?
         } else {
@@ -167,12 +172,37 @@ pub fn train_skinnet(
     plot_logs(work, "SkinNet")?;
     check_validation(&trainer)?;
     let mut model = trainer.skf_model()?;
-    // Fixed vertex colours leave the nets untrained: storing them would show noise in a viewer.
-    if let Some(a) = appearance.filter(|_| stages.colours != ColourSource::FixedVertexColours) {
+    // Fixed colours leave AlbedoNet untrained: storing it would show noise in a viewer.
+    if let Some(a) = appearance.filter(|_| stages.learns_albedo()) {
         a.push_to_skf(&mut model)?;
     }
     model.write(out)?;
     Ok(seconds)
+}
+
+/// `trainer` after stage 1, ready for stages 2–4: with `stages.full_resolution` moved onto the
+/// capture's full-resolution template ([`Trainer::with_data`]), unless it already trains on it or
+/// no stage runs.
+pub fn for_stages(
+    trainer: Trainer,
+    capture: &Capture,
+    initial: &StaticSkin,
+    options: &DataOptions,
+) -> anyhow::Result<Trainer> {
+    let stages = trainer.config().stages;
+    if !(stages.any() && stages.full_resolution)
+        || trainer.training_vertex_count() == capture.template.vertex_count()
+    {
+        return Ok(trainer);
+    }
+    let full = DataOptions {
+        train_vertices: 0,
+        ..*options
+    };
+    let data = train_data(capture, initial, &full)?;
+    trainer
+        .with_data(data)
+        .context("moving SkinNet to the full-resolution template for stages 2–4")
 }
 
 /// Stage 1 as an ensemble ([`skinfield_trainer::train::ensemble`]): every member trained in

@@ -73,6 +73,28 @@ impl Trainer {
         Ok(tensors)
     }
 
+    /// The same SkinNet run moved onto other training data of the same capture (another
+    /// training template, such as the full-resolution one, for stage 4): parameters, Adam's
+    /// moments, the parameter averages, the best-validated average and the progress carry over;
+    /// what is derived from the template (rest positions, Laplacian, candidate masks, the
+    /// validation frames' scores) is rebuilt for `data`. The static baseline has one logit row
+    /// per vertex and cannot move (an error).
+    pub fn with_data(self, data: TrainData) -> Result<Self, TrainError> {
+        if self.is_static() {
+            return Err(TrainError::Data(
+                "the static baseline's weights belong to its template's vertices".into(),
+            ));
+        }
+        let tensors = self.checkpoint_tensors("")?;
+        let mut moved = Trainer::new(data, self.config.clone(), false)?;
+        moved.restore_tensors(
+            &tensors,
+            "",
+            Path::new("(the run moved to other training data)"),
+        )?;
+        Ok(moved)
+    }
+
     /// Restores a checkpoint written by [`Trainer::save_checkpoint`] for the same data, config
     /// and model kind; training then continues exactly where it stopped.
     pub fn resume(&mut self, path: &Path) -> Result<(), TrainError> {

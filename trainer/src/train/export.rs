@@ -201,6 +201,12 @@ impl Trainer {
         &self.config
     }
 
+    /// Vertex count of the training template the run trains on.
+    #[must_use]
+    pub fn training_vertex_count(&self) -> usize {
+        self.data.template.vertex_count()
+    }
+
     /// `(warm-start iterations done, image iterations done)`.
     #[must_use]
     pub fn progress(&self) -> (u64, u64) {

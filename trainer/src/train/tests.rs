@@ -1408,3 +1408,62 @@ fn pose_locality_keeps_weights_from_following_joints_that_do_not_move_them() {
          ({local:.2e} against {free:.2e})"
     );
 }
+
+/// Every value of a checkpoint tensor, as `f64`.
+fn tensor_values(t: &Tensor) -> Vec<f64> {
+    t.flatten_all()
+        .unwrap()
+        .to_dtype(DType::F64)
+        .unwrap()
+        .to_vec1()
+        .unwrap()
+}
+
+/// A run moved onto other training data keeps its state: onto the same data every checkpoint
+/// tensor (parameters, Adam's moments, averages, progress) is unchanged and so are the weights;
+/// onto other data (here with full-resolution query cells) the parameters and the progress
+/// carry over. The static baseline, one logit row per vertex, cannot move.
+#[test]
+fn a_run_moved_onto_other_data_keeps_its_state() {
+    let (data, _) = scene(3);
+    let a = trained(data.clone(), config());
+    let before = a.checkpoint_tensors("").unwrap();
+    let weights = a.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap();
+    let progress = a.progress();
+    let b = a.with_data(data.clone()).unwrap();
+    let after = b.checkpoint_tensors("").unwrap();
+    let mut names: Vec<&String> = before.keys().collect();
+    names.sort();
+    let mut moved_names: Vec<&String> = after.keys().collect();
+    moved_names.sort();
+    assert_eq!(names, moved_names);
+    for name in names {
+        assert_eq!(
+            tensor_values(&before[name]),
+            tensor_values(&after[name]),
+            "{name}"
+        );
+    }
+    assert_eq!(
+        b.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap(),
+        weights
+    );
+    assert_eq!(b.progress(), progress);
+
+    let (other, _) = scene_with_queries(3);
+    let c = b.with_data(other).unwrap();
+    assert_eq!(c.progress(), progress);
+    let moved = c.checkpoint_tensors("").unwrap();
+    let params: Vec<&String> = before.keys().filter(|k| k.starts_with("param.")).collect();
+    assert!(!params.is_empty());
+    for name in params {
+        assert_eq!(
+            tensor_values(&before[name]),
+            tensor_values(&moved[name]),
+            "{name}"
+        );
+    }
+
+    let baseline = Trainer::new(data.clone(), config(), true).unwrap();
+    assert!(matches!(baseline.with_data(data), Err(TrainError::Data(_))));
+}

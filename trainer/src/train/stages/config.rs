@@ -16,6 +16,11 @@ pub enum ColourSource {
     AlbedoOnly,
     /// Per-vertex colours averaged from the first training frame's images (no appearance nets).
     FixedVertexColours,
+    /// The template's own vertex colours as the albedo (a textured scan's, or a synthetic
+    /// capture's true albedo), ShadowNet learned over it in stage 3 (stage 2 skipped). On a
+    /// synthetic capture this is the rendering loss with the appearance it was rendered from,
+    /// less the shading: what the term can do when the appearance is not what limits it.
+    TemplateAlbedo,
 }
 
 /// Stages 2–4 (a [`crate::train::TrainConfig`] field; all iterations 0 = stage 1 only).
@@ -36,13 +41,19 @@ pub struct StageConfig {
     /// renders nothing: SkinNet continues with stage 1's losses on stage 4's learning-rate
     /// schedule (the "w/o L_rend" control of the ablation).
     pub rendering_weight: f64,
-    /// Colours used by the rendering loss in stage 4.
+    /// Colours used by the rendering loss in stages 3 and 4.
     pub colours: ColourSource,
     /// Learning rate of the appearance nets (Adam otherwise as in stage 1).
     pub appearance_lr: f64,
     /// Standard deviation in pixels of the Gaussian that low-passes the target images inside
     /// their masks ([`crate::losses::rendering::blur_within_mask`]; 0 = the images as captured).
     pub image_blur_px: f64,
+    /// Run stages 2–4 on the full-resolution template instead of stage 1's simplified training
+    /// template (the run moves with [`crate::train::Trainer::with_data`]): stage 1 finds the
+    /// weights cheaply on a quarter of the vertices, stage 4 then fits every vertex's outline
+    /// and Laplacian where the 2,500-vertex template could only interpolate. See
+    /// `docs/experiments/fidelity.md`, *Stage 4 at full resolution*.
+    pub full_resolution: bool,
 }
 
 impl Default for StageConfig {
@@ -57,6 +68,7 @@ impl Default for StageConfig {
             colours: ColourSource::Field,
             appearance_lr: 1e-3,
             image_blur_px: 2.0,
+            full_resolution: false,
         }
     }
 }
@@ -68,21 +80,35 @@ impl StageConfig {
         self.albedo_iterations + self.shadow_iterations + self.refine_iterations > 0
     }
 
+    /// True when any stage renders the colour images (stage 2 or 3 runs, or stage 4 with a
+    /// rendering weight): without it stage 4 continues stage 1's losses and needs no images.
+    #[must_use]
+    pub fn renders(&self) -> bool {
+        let s = self.scheduled();
+        s.albedo + s.shadow > 0 || (s.refine > 0 && self.rendering_weight > 0.0)
+    }
+
+    /// True when AlbedoNet is learned (stage 2 runs for these colours), so the appearance nets
+    /// are worth storing in the exported model; with fixed colours or the template's albedo they
+    /// would show an untrained net's noise in a viewer.
+    #[must_use]
+    pub fn learns_albedo(&self) -> bool {
+        matches!(self.colours, ColourSource::Field | ColourSource::AlbedoOnly)
+    }
+
     /// The iterations each of stages 2, 3 and 4 runs: the configured counts, less the stages
     /// that `colours` skips (no AlbedoNet with fixed vertex colours, no ShadowNet without the
     /// full field).
     #[must_use]
     pub(super) fn scheduled(&self) -> StageProgress {
         StageProgress {
-            albedo: if self.colours == ColourSource::FixedVertexColours {
-                0
-            } else {
-                self.albedo_iterations
+            albedo: match self.colours {
+                ColourSource::Field | ColourSource::AlbedoOnly => self.albedo_iterations,
+                ColourSource::FixedVertexColours | ColourSource::TemplateAlbedo => 0,
             },
-            shadow: if self.colours == ColourSource::Field {
-                self.shadow_iterations
-            } else {
-                0
+            shadow: match self.colours {
+                ColourSource::Field | ColourSource::TemplateAlbedo => self.shadow_iterations,
+                ColourSource::FixedVertexColours | ColourSource::AlbedoOnly => 0,
             },
             refine: self.refine_iterations,
         }

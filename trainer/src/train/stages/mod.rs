@@ -23,7 +23,10 @@
 //!
 //! The ablations of the paper's Table 2 are [`ColourSource`]s: without ShadowNet (stage 3
 //! skipped, `c = a` in stage 4) and with fixed per-vertex colours read from the images of the
-//! first training frame instead of the appearance field. Stages 2–4 write their own checkpoint
+//! first training frame instead of the appearance field; [`ColourSource::TemplateAlbedo`]
+//! takes the template's own vertex colours as the albedo (stage 2 skipped, ShadowNet learned
+//! over it), which on a synthetic capture measures what the term can do when the appearance does
+//! not limit it. Stages 2–4 write their own checkpoint
 //! ([`checkpoint`]); `trainer train --resume` continues from it.
 
 use std::io::Write;
@@ -124,6 +127,8 @@ pub(crate) struct RenderingTerm {
     images: Vec<Vec<RgbTarget>>,
     appearance: Appearance,
     fixed: Option<Tensor>,
+    /// The template's colours as the albedo ([`ColourSource::TemplateAlbedo`]).
+    albedo: Option<Tensor>,
     config: StageConfig,
     /// Unweighted value of the last evaluation.
     last: f64,
@@ -154,24 +159,49 @@ impl Trainer {
         Ok(lbs(&w, &skinning, &self.rest)?)
     }
 
+    /// The training template's vertex colours `[V, 3]` as the albedo of
+    /// [`ColourSource::TemplateAlbedo`] (`None` for the other sources).
+    fn template_albedo(&self, config: &StageConfig) -> Result<Option<Tensor>, TrainError> {
+        if config.colours != ColourSource::TemplateAlbedo {
+            return Ok(None);
+        }
+        let colours = self.data.template.colors.as_ref().ok_or_else(|| {
+            TrainError::Data(
+                "stages.colours = template_albedo needs a template with vertex colours".into(),
+            )
+        })?;
+        let flat: Vec<f32> = colours.iter().flat_map(|c| c.to_array()).collect();
+        Ok(Some(Tensor::from_vec(
+            flat,
+            (colours.len(), 3),
+            &Device::Cpu,
+        )?))
+    }
+
     /// Mean rendering loss over the views of `frames` for posed vertices `[B, V, 3]`, samples
-    /// drawn from the stream `(phase, iteration)`.
+    /// drawn from the stream `(phase, iteration)`; `albedo` replaces AlbedoNet's output where
+    /// given ([`ColourSource::TemplateAlbedo`]).
+    #[allow(clippy::too_many_arguments)]
     fn rendering_mean(
         &self,
         images: &[Vec<RgbTarget>],
         frames: &[usize],
         posed: &Tensor,
         colouring: Colouring,
+        albedo: Option<&Tensor>,
         config: &StageConfig,
         (phase, iteration): (u64, u64),
     ) -> Result<Tensor, TrainError> {
         let mut rng = frame_rng(self.config.seed, phase, iteration);
         let encoded = self.encoded()?;
         let triangles = &self.data.template.triangles;
-        let albedo_all = match colouring {
-            Colouring::Albedo(a) => Some(a.albedo(encoded)?),
-            Colouring::Shadow(a) | Colouring::Frozen(a, _) => Some(a.albedo(encoded)?.detach()),
-            Colouring::Fixed(_) => None,
+        let albedo_all = match (colouring, albedo) {
+            (Colouring::Fixed(_), _) => None,
+            (_, Some(t)) => Some(t.clone()),
+            (Colouring::Albedo(a), None) => Some(a.albedo(encoded)?),
+            (Colouring::Shadow(a) | Colouring::Frozen(a, _), None) => {
+                Some(a.albedo(encoded)?.detach())
+            }
         };
         let posed_values = posed.to_vec3::<f32>()?;
         let mut terms = Vec::new();
@@ -254,13 +284,17 @@ impl Trainer {
         };
         let colouring = match (&term.fixed, term.config.colours) {
             (Some(t), _) => Colouring::Fixed(t),
-            (None, c) => Colouring::Frozen(&term.appearance, c == ColourSource::Field),
+            (None, c) => Colouring::Frozen(
+                &term.appearance,
+                matches!(c, ColourSource::Field | ColourSource::TemplateAlbedo),
+            ),
         };
         let result = self.rendering_mean(
             &term.images,
             frames,
             posed,
             colouring,
+            term.albedo.as_ref(),
             &term.config,
             (PHASE_REFINE, self.done),
         );
@@ -358,18 +392,22 @@ impl Trainer {
         resume: bool,
     ) -> Result<Appearance, TrainError> {
         let config = self.config.stages;
-        if !self.validation.is_empty()
+        if !config.renders() {
+            // Stage 4 without the rendering term reads no image.
+            images.clear();
+        } else if !self.validation.is_empty()
             && images.len() == self.data.frames.len() + self.validation.len()
         {
             // Images of every training frame, as `load_images` reads them: the frames held out
             // for validation take no part in stages 2–4.
             super::validation::take_held_out(&mut images, self.config.validation_frames);
         }
-        if images.len() != self.data.frames.len()
-            || images
-                .iter()
-                .zip(&self.data.frames)
-                .any(|(i, f)| i.len() != f.views.len())
+        if config.renders()
+            && (images.len() != self.data.frames.len()
+                || images
+                    .iter()
+                    .zip(&self.data.frames)
+                    .any(|(i, f)| i.len() != f.views.len()))
         {
             return Err(TrainError::Data(
                 "colour images do not match the training frames and views".into(),
@@ -415,6 +453,7 @@ impl Trainer {
         };
         let every = self.config.checkpoint_every;
         let use_nets = config.colours != ColourSource::FixedVertexColours;
+        let template_albedo = self.template_albedo(&config)?;
         let scheduled = config.scheduled();
         for (stage, iterations, phase) in [
             (2u64, scheduled.albedo, PHASE_ALBEDO),
@@ -450,8 +489,15 @@ impl Trainer {
                 } else {
                     Colouring::Shadow(&appearance)
                 };
-                let loss =
-                    self.rendering_mean(&images, &frames, &posed, colouring, &config, (phase, it))?;
+                let loss = self.rendering_mean(
+                    &images,
+                    &frames,
+                    &posed,
+                    colouring,
+                    template_albedo.as_ref(),
+                    &config,
+                    (phase, it),
+                )?;
                 let value = f64::from(loss.to_vec0::<f32>()?);
                 writeln!(csv, "{stage},{},{value:.6e},{value:.6e}", it + 1).map_err(io)?;
                 optimiser.backward_step(&loss)?;
@@ -479,6 +525,7 @@ impl Trainer {
                 images,
                 appearance: appearance.clone(),
                 fixed: state.fixed.clone(),
+                albedo: template_albedo,
                 config,
                 last: 0.0,
             });
