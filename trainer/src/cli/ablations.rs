@@ -1,13 +1,16 @@
 //! `trainer demo --ablations`: the rows of the paper's Table 2 that apply to the built-in
 //! capture, each trained and scored on the held-out test poses.
 //!
-//! Rows: initial (bone heat); static weights; stage 1 only (what the plain demo exports);
-//! w/o L_rend (stage 4 with λ_rend = 0: stage 1's losses for stage 4's iterations on its
-//! learning-rate schedule, so the SkinNet budget is equal); w/ albedo only (stages 1, 2, 4);
+//! Rows: initial (bone heat); static weights; stage 1 only; w/o L_rend (stage 4 with λ_rend = 0:
+//! stage 1's losses for stage 4's iterations on its learning-rate schedule, so the SkinNet
+//! budget is equal; with the default full-resolution stage 4 this is what the plain demo
+//! exports); w/ albedo only (stages 1, 2, 4);
 //! w/ fixed vertex colours (stage 1, then stage 4 with colours read from the first training
 //! frame's images); ours (stages 1–4); ours with fewer cameras (stages 1–4 on the first
-//! `--ablation-cameras` cameras); silhouettes only (stage 1 from the warm start with every
-//! regulariser off, the Laplacian included, for stage 1's and stage 4's iterations together).
+//! `--ablation-cameras` cameras); silhouettes only (every regulariser off, the Laplacian
+//! included: stage 1 from the warm start, then stage 4 without the rendering term when the
+//! configuration runs it at full resolution, otherwise stage 1 for both stages' iterations).
+//! With the default full-resolution stage 4 every stage-4 row runs on the full template.
 //! The rows with every camera but the last share one stage-1 run (its checkpoint), so they
 //! differ only in what follows it; the variants continue from that run's last parameter
 //! average, the stage-1 row is its best-validated average (as the demo exports it).
@@ -32,8 +35,8 @@ use super::train::{for_stages, train_static};
 /// The row every other is compared with: all four stages, every camera.
 pub const FULL_METHOD: &str = "ours";
 
-/// The row of stage 1 alone, exported as the plain demo exports it.
-pub const STAGE1_METHOD: &str = "stage 1 only (the demo's SkinNet)";
+/// The row of stage 1 alone, exported as a run without stages 2–4 exports it.
+pub const STAGE1_METHOD: &str = "stage 1 only";
 
 /// Options of `trainer demo --ablations`.
 #[derive(ClapArgs, Debug, Clone)]
@@ -176,8 +179,8 @@ pub fn run(
             }
         );
         if cameras == 0 {
-            // Stage 1 as the plain demo exports it (the best-validated average), so the
-            // table also holds the demo's SkinNet row of this seed.
+            // Stage 1 as a run without stages 2–4 exports it (the best-validated average);
+            // the demo's SkinNet (stage 4 at full resolution by default) is "w/o L_rend".
             let row = export_best_and_score(&mut stage1, &stage1_dir, capture, STAGE1_METHOD)?;
             rows.push((row, stage1_s));
         }
@@ -229,7 +232,7 @@ pub fn run(
         }
         if cameras == 0 {
             rows.push(silhouettes_only(
-                capture, &data, &base, args, out, progress,
+                capture, initial, &options, &data, &base, args, out, progress,
             )?);
         }
     }
@@ -250,12 +253,17 @@ pub fn run(
     }
     let _ = writeln!(
         md,
-        "\nStage 1: {} warm-start + {} iterations; stage 2: {}; stage 3: {}; stage 4: {} (λ_rend {}, {} pixels × {} views per frame per iteration, images blurred by {} px); {} training vertices.",
+        "\nStage 1: {} warm-start + {} iterations; stage 2: {}; stage 3: {}; stage 4: {}{} (λ_rend {}, {} pixels × {} views per frame per iteration, images blurred by {} px); {} training vertices.",
         base.warm_start_iterations,
         base.iterations,
         args.albedo_iterations,
         args.shadow_iterations,
         args.refine_iterations,
+        if full.full_resolution {
+            " at full resolution"
+        } else {
+            ""
+        },
         args.rendering_weight,
         args.pixels_per_view,
         args.views_per_frame,
@@ -293,11 +301,16 @@ fn export_best_and_score(
     eval_row(capture, &Skinning::Skf(path), name)
 }
 
-/// The "silhouettes only" row: stage 1 from the warm start with the Laplacian and the skinning
-/// regularisers off, for as many image iterations as stage 1 and stage 4 together, so the row
-/// says what the silhouette terms alone do to the weights.
+/// The "silhouettes only" row: the training as configured with the Laplacian and the skinning
+/// regularisers off, so the row says what the silhouette terms alone do to the weights. When
+/// the base configuration runs stage 4 at full resolution (the default) so does this row, with
+/// the same iterations and without the rendering term; otherwise stage 1 runs for as many image
+/// iterations as stage 1 and stage 4 together.
+#[allow(clippy::too_many_arguments)]
 fn silhouettes_only(
     capture: &Capture,
+    initial: &StaticSkin,
+    options: &DataOptions,
     data: &TrainData,
     base: &TrainConfig,
     args: &AblationArgs,
@@ -306,20 +319,40 @@ fn silhouettes_only(
 ) -> anyhow::Result<(EvalRow, f64)> {
     let name = "silhouettes only";
     let dir = out.join("ablation-silhouettes_only");
-    let config = TrainConfig {
-        iterations: base.iterations + args.refine_iterations,
-        weights: LossWeights {
-            laplacian: 0.0,
-            skinning: 0.0,
-            partwise: 0.0,
-            prior: 0.0,
-            ..base.weights
-        },
-        ..base.clone()
+    let weights = LossWeights {
+        laplacian: 0.0,
+        skinning: 0.0,
+        partwise: 0.0,
+        prior: 0.0,
+        ..base.weights
+    };
+    let config = if base.stages.full_resolution {
+        TrainConfig {
+            weights,
+            stages: StageConfig {
+                refine_iterations: args.refine_iterations,
+                rendering_weight: 0.0,
+                full_resolution: true,
+                ..StageConfig::default()
+            },
+            ..base.clone()
+        }
+    } else {
+        TrainConfig {
+            iterations: base.iterations + args.refine_iterations,
+            weights,
+            stages: StageConfig::default(),
+            ..base.clone()
+        }
     };
     let t = Instant::now();
     let mut trainer = Trainer::new(data.clone(), config, false)?;
     trainer.run(&dir, progress)?;
+    trainer.adopt_average()?;
+    let mut trainer = for_stages(trainer, capture, initial, options)?;
+    if trainer.config().stages.any() {
+        trainer.run_stages(Vec::new(), &dir, progress)?;
+    }
     let seconds = t.elapsed().as_secs_f64();
     let row = export_best_and_score(&mut trainer, &dir, capture, name)?;
     println!("{name}: Chamfer {:.3} cm ({seconds:.0} s)", row.chamfer_cm);

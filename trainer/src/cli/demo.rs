@@ -207,7 +207,8 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         t.elapsed().as_secs_f64(),
     ));
     let (warm_ran, image_ran) = iterations_run(&skin_work, &config);
-    let per_iteration = loop_s / (image_ran + warm_ran).max(1) as f64;
+    let refine_ran = config.stages.refine_iterations;
+    let per_iteration = loop_s / (image_ran + warm_ran + refine_ran).max(1) as f64;
 
     let static_file = out.join("static_weights.json");
     let static_work = out.join("train-static");
@@ -370,10 +371,14 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
     }
     let _ = writeln!(
         md,
-        "\nSkinNet: {} warm-start + {} image iterations at {} training vertices{}, {:.3} s per iteration on average.",
+        "\nSkinNet: {} warm-start + {} image iterations at {} training vertices{}{}, {:.3} s per iteration on average.",
         warm_ran,
         image_ran,
         args.train_vertices,
+        config
+            .stages
+            .refine_summary()
+            .map_or_else(String::new, |s| format!(", then {s}")),
         if config.ensemble.is_on() {
             format!(
                 " ({} ensemble members and the distillation of their mean)",

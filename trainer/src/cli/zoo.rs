@@ -6,7 +6,8 @@
 //!
 //! The characters and their clip splits are fixed in [`ZOO`] and named in the table. The
 //! training budget is the trainer's defaults (or `--config`), overridden by `--warm-start`,
-//! `--iterations`, `--static-iterations`; `--quick` makes each of them 30 unless given.
+//! `--iterations`, `--static-iterations`; `--quick` makes each of them 30 unless given (and
+//! stage 4 at most 3 iterations).
 //! A character that fails (a missing file, a training run the trainer refuses) gets a row
 //! saying why; the command then exits with an error after writing the tables.
 
@@ -168,6 +169,9 @@ pub struct Budget {
     /// SkinNets trained per character, their mean distilled into the one scored (the
     /// configuration's `ensemble.members`).
     pub members: usize,
+    /// Stage 4 after stage 1, as [`skinfield_trainer::train::stages::StageConfig::refine_summary`]
+    /// words it (`None`: no stage 4).
+    pub refine: Option<String>,
     /// Static-baseline iterations.
     pub static_iterations: u64,
     /// SkinNet training-template vertices.
@@ -308,10 +312,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         |given: Option<u64>, default: u64| given.unwrap_or(if args.quick { 30 } else { default });
     config.warm_start_iterations = quick(args.warm_start, config.warm_start_iterations);
     config.iterations = quick(args.iterations, config.iterations);
+    if args.quick {
+        // A smoke run: stage 4 (the default's full-resolution finish) only shows that it runs.
+        config.stages.refine_iterations = config.stages.refine_iterations.min(3);
+    }
     let budget = Budget {
         warm_start: config.warm_start_iterations,
         iterations: config.iterations,
         members: config.ensemble.members,
+        refine: config.stages.refine_summary(),
         static_iterations: quick(args.static_iterations, config.iterations),
         train_vertices: DataOptions::default().train_vertices,
         seed: args.seed,

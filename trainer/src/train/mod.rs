@@ -61,7 +61,9 @@ use candidate_mask::Candidates;
 pub(crate) use checkpoint::{
     insert_varmap, load_tensors, read_u64s, restore_varmap, save_tensors, split_u64,
 };
-pub use config::{ConfigError, LaplacianReference, LossWeights, TrainConfig};
+pub use config::{
+    ConfigError, DEFAULT_REFINE_ITERATIONS, LaplacianReference, LossWeights, TrainConfig,
+};
 pub use data::{Frame, TrainData, View};
 pub use error::TrainError;
 pub use pose_refinement::{FrameCorrection, PoseRefinementConfig};

@@ -98,7 +98,7 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
     let _ = writeln!(
         md,
         "Budget per character: SkinNet {}{} warm-start + {} image iterations{} at {} training \
-         vertices, static baseline {} iterations; seed {}; captures of {} cameras at {}² pixels, \
+         vertices{}, static baseline {} iterations; seed {}; captures of {} cameras at {}² pixels, \
          {} frames per training clip and {} per test clip. Methods: `initial` = bone heat (LBS), \
          `static` = learned pose-independent weights, `ours` = SkinNet, `oracle` = the ground \
          truth's own weights under LBS (the ground truth is DQS + flexion bulges, none on the \
@@ -116,6 +116,10 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
             ""
         },
         budget.train_vertices,
+        budget
+            .refine
+            .as_ref()
+            .map_or_else(String::new, |s| format!(" + {s}")),
         budget.static_iterations,
         budget.seed,
         budget.cameras,
@@ -352,6 +356,7 @@ mod tests {
             warm_start: 1,
             iterations: 1,
             members: 1,
+            refine: None,
             static_iterations: 1,
             train_vertices: 1,
             seed: 0,

@@ -88,6 +88,21 @@ impl StageConfig {
         s.albedo + s.shadow > 0 || (s.refine > 0 && self.rendering_weight > 0.0)
     }
 
+    /// "N stage-4 iterations" (with "at full resolution" where it moves there) for run
+    /// summaries; `None` when stage 4 does not run.
+    #[must_use]
+    pub fn refine_summary(&self) -> Option<String> {
+        let n = self.scheduled().refine;
+        (n > 0).then(|| {
+            let at = if self.full_resolution {
+                " at full resolution"
+            } else {
+                ""
+            };
+            format!("{n} stage-4 iterations{at}")
+        })
+    }
+
     /// True when AlbedoNet is learned (stage 2 runs for these colours), so the appearance nets
     /// are worth storing in the exported model; with fixed colours or the template's albedo they
     /// would show an untrained net's noise in a viewer.

@@ -314,7 +314,15 @@ fn stage_config_reads_from_json_and_names_bad_fields() {
             })
         ));
     }
-    assert!(c.stages.any() && !TrainConfig::default().stages.any());
+    assert!(c.stages.any());
+    // The default runs stage 4 alone, at full resolution, without rendering anything.
+    let d = TrainConfig::default().stages;
+    assert!(d.any() && d.full_resolution && !d.renders());
+    assert_eq!(
+        d.refine_summary().as_deref(),
+        Some("100 stage-4 iterations at full resolution")
+    );
+    assert_eq!(StageConfig::default().refine_summary(), None);
     std::fs::write(&p, r#"{"stages": {"rendering_weight": -1}}"#).unwrap();
     assert!(matches!(
         TrainConfig::load(&p),
