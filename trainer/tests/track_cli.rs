@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{tiny_synth, trainer};
+use common::{four_camera_capture, tiny_synth, trainer};
 use skinfield_formats::capture::load_capture;
 use skinfield_trainer::train::validation::held_out_indices;
 
@@ -118,30 +118,23 @@ fn synth_writes_the_detections_of_the_landmark_set_asked_for() {
     }
 }
 
-/// A tiny built-in capture of 4 cameras at 48² in `DIR/cap`, without keypoints.
-fn four_camera_capture(dir: &std::path::Path) -> std::path::PathBuf {
-    let cap = dir.join("cap");
-    let (code, _, err) = tiny_synth(
-        cap.to_str().unwrap(),
-        "1",
-        &["--cameras", "4", "--resolution", "48"],
-    );
-    assert_eq!(code, 0, "{err}");
-    cap
-}
-
 #[test]
 fn a_bad_filter_setting_is_refused_before_anything_is_written() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = four_camera_capture(tmp.path());
+    let cap = four_camera_capture(tmp.path(), "1");
     let c = cap.to_str().unwrap();
     let tracked = tmp.path().join("tracked");
-    for sigma in ["-1", "NaN", "1e9"] {
-        let arg = format!("--filter-sigma={sigma}");
-        let (code, _, err) = track(c, &tracked, &["--synthesize", &arg]);
-        assert_eq!(code, 1, "{sigma}");
-        assert!(err.contains("--filter-sigma"), "{sigma}: {err}");
-        assert!(!tracked.exists(), "{sigma}: the copy was written");
+    for (flag, values) in [
+        ("--filter-sigma", ["-1", "NaN", "1e9"]),
+        ("--fps", ["0", "-24", "NaN"]),
+    ] {
+        for value in values {
+            let arg = format!("{flag}={value}");
+            let (code, _, err) = track(c, &tracked, &["--synthesize", &arg]);
+            assert_eq!(code, 1, "{arg}");
+            assert!(err.contains(flag), "{arg}: {err}");
+            assert!(!tracked.exists(), "{arg}: the copy was written");
+        }
     }
     let (code, _, err) = track(
         c,
@@ -160,13 +153,6 @@ fn a_bad_filter_setting_is_refused_before_anything_is_written() {
         "{err}"
     );
     assert!(!tracked.exists(), "the copy was written");
-    for fps in ["0", "-24", "NaN"] {
-        let arg = format!("--fps={fps}");
-        let (code, _, err) = track(c, &tracked, &["--synthesize", &arg]);
-        assert_eq!(code, 1, "{fps}");
-        assert!(err.contains("--fps"), "{fps}: {err}");
-        assert!(!tracked.exists(), "{fps}: the copy was written");
-    }
 }
 
 /// The `fps` of a capture's `motion.json`.
@@ -179,7 +165,7 @@ fn motion_fps(capture: &std::path::Path) -> f64 {
 #[test]
 fn the_tracked_motion_keeps_the_input_frame_rate_unless_told_otherwise() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = four_camera_capture(tmp.path());
+    let cap = four_camera_capture(tmp.path(), "1");
     // A video at 80 frames per second.
     let path = cap.join("motion.json");
     let mut motion: serde_json::Value =
@@ -202,7 +188,7 @@ fn the_tracked_motion_keeps_the_input_frame_rate_unless_told_otherwise() {
 #[test]
 fn track_synthesize_writes_the_detections_into_the_copy_and_leaves_the_input_alone() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = four_camera_capture(tmp.path());
+    let cap = four_camera_capture(tmp.path(), "1");
     let c = cap.to_str().unwrap();
     let manifest_before = std::fs::read(cap.join("manifest.json")).unwrap();
     let tracked = tmp.path().join("tracked");
@@ -241,10 +227,8 @@ fn track_synthesize_writes_the_detections_into_the_copy_and_leaves_the_input_alo
 #[test]
 fn train_refine_poses_writes_the_corrected_training_motion() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = tmp.path().join("cap");
+    let cap = four_camera_capture(tmp.path(), "2");
     let c = cap.to_str().unwrap();
-    let (code, _, err) = tiny_synth(c, "2", &["--cameras", "4", "--resolution", "48"]);
-    assert_eq!(code, 0, "{err}");
     let capture = load_capture(&cap).unwrap();
     let config = tmp.path().join("c.json");
     std::fs::write(

@@ -5,15 +5,13 @@
 
 mod common;
 
-use common::tiny_synth;
+use common::four_camera_capture;
 
 #[test]
 fn an_ensemble_trains_its_members_then_distils_one_model() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = tmp.path().join("cap");
+    let cap = four_camera_capture(tmp.path(), "2");
     let c = cap.to_str().unwrap();
-    let (code, _, err) = tiny_synth(c, "2", &["--cameras", "4", "--resolution", "48"]);
-    assert_eq!(code, 0, "{err}");
     let config = tmp.path().join("c.json");
     std::fs::write(
         &config,
@@ -69,10 +67,8 @@ fn an_ensemble_trains_its_members_then_distils_one_model() {
 #[test]
 fn stage_four_moves_to_the_full_resolution_template() {
     let tmp = tempfile::tempdir().unwrap();
-    let cap = tmp.path().join("cap");
+    let cap = four_camera_capture(tmp.path(), "2");
     let c = cap.to_str().unwrap();
-    let (code, _, err) = tiny_synth(c, "2", &["--cameras", "4", "--resolution", "48"]);
-    assert_eq!(code, 0, "{err}");
     let full = skinfield_formats::capture::load_capture(&cap)
         .unwrap()
         .template

@@ -57,3 +57,18 @@ pub fn train(capture: &str, out: &str, config: &str, extra: &[&str]) -> (i32, St
     args.extend_from_slice(extra);
     trainer(&args)
 }
+
+/// A tiny built-in capture of 4 cameras at 48² with `train_frames` training frames, synthesised
+/// into `DIR/cap`; returns its folder.
+// Each test crate compiles this module on its own; not every one synthesises.
+#[allow(dead_code)]
+pub fn four_camera_capture(dir: &std::path::Path, train_frames: &str) -> std::path::PathBuf {
+    let cap = dir.join("cap");
+    let (code, _, err) = tiny_synth(
+        cap.to_str().unwrap(),
+        train_frames,
+        &["--cameras", "4", "--resolution", "48"],
+    );
+    assert_eq!(code, 0, "{err}");
+    cap
+}
