@@ -30,7 +30,7 @@ use skinfield_trainer::train::data::{DataOptions, TrainData, train_data};
 use skinfield_trainer::train::stages::{ColourSource, StageConfig, load_images};
 use skinfield_trainer::train::{LossWeights, TrainConfig, Trainer};
 
-use super::train::{for_stages, train_static};
+use super::train::train_static;
 
 /// The row every other is compared with: all four stages, every camera.
 pub const FULL_METHOD: &str = "ours";
@@ -164,6 +164,18 @@ pub fn run(
             cameras,
         };
         let data = train_data(capture, initial, &options)?;
+        // Stages 2–4 on the full template: built once, every variant resumes stage 1 onto it.
+        let stage_data = full
+            .full_resolution
+            .then(|| {
+                let every_vertex = DataOptions {
+                    train_vertices: 0,
+                    ..options
+                };
+                train_data(capture, initial, &every_vertex)
+            })
+            .transpose()?;
+        let stage_data = stage_data.as_ref().unwrap_or(&data);
         let images = load_images(capture, &options, full.image_blur_px)?;
         let stage1_dir = out.join(format!("ablation-stage1-cams{cameras}"));
         let t = Instant::now();
@@ -202,11 +214,10 @@ pub fn run(
                 stages: v.stages,
                 ..base.clone()
             };
-            let mut trainer = Trainer::new(data.clone(), config, false)?;
+            let mut trainer = Trainer::new(stage_data.clone(), config, false)?;
             trainer.resume(&stage1_dir.join("checkpoint.safetensors"))?;
             trainer.run(&dir, progress)?;
             trainer.adopt_average()?;
-            let mut trainer = for_stages(trainer, capture, initial, &options)?;
             let appearance = if v.stages.any() {
                 Some(trainer.run_stages(images.clone(), &dir, progress)?)
             } else {
@@ -232,7 +243,7 @@ pub fn run(
         }
         if cameras == 0 {
             rows.push(silhouettes_only(
-                capture, initial, &options, &data, &base, args, out, progress,
+                capture, &data, stage_data, &base, args, out, progress,
             )?);
         }
     }
@@ -305,13 +316,12 @@ fn export_best_and_score(
 /// regularisers off, so the row says what the silhouette terms alone do to the weights. When
 /// the base configuration runs stage 4 at full resolution (the default) so does this row, with
 /// the same iterations and without the rendering term; otherwise stage 1 runs for as many image
-/// iterations as stage 1 and stage 4 together.
-#[allow(clippy::too_many_arguments)]
+/// iterations as stage 1 and stage 4 together. Stage 1 trains on `data`, stage 4 on
+/// `stage_data` (the full template's).
 fn silhouettes_only(
     capture: &Capture,
-    initial: &StaticSkin,
-    options: &DataOptions,
     data: &TrainData,
+    stage_data: &TrainData,
     base: &TrainConfig,
     args: &AblationArgs,
     out: &Path,
@@ -349,8 +359,8 @@ fn silhouettes_only(
     let mut trainer = Trainer::new(data.clone(), config, false)?;
     trainer.run(&dir, progress)?;
     trainer.adopt_average()?;
-    let mut trainer = for_stages(trainer, capture, initial, options)?;
     if trainer.config().stages.any() {
+        trainer = trainer.with_data(stage_data.clone())?;
         trainer.run_stages(Vec::new(), &dir, progress)?;
     }
     let seconds = t.elapsed().as_secs_f64();

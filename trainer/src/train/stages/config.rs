@@ -111,19 +111,31 @@ impl StageConfig {
         matches!(self.colours, ColourSource::Field | ColourSource::AlbedoOnly)
     }
 
+    /// True when ShadowNet is learned (stage 3 runs for these colours) and shades the albedo in
+    /// stage 4.
+    #[must_use]
+    pub fn learns_shading(&self) -> bool {
+        matches!(
+            self.colours,
+            ColourSource::Field | ColourSource::TemplateAlbedo
+        )
+    }
+
     /// The iterations each of stages 2, 3 and 4 runs: the configured counts, less the stages
     /// that `colours` skips (no AlbedoNet with fixed vertex colours, no ShadowNet without the
     /// full field).
     #[must_use]
     pub(super) fn scheduled(&self) -> StageProgress {
         StageProgress {
-            albedo: match self.colours {
-                ColourSource::Field | ColourSource::AlbedoOnly => self.albedo_iterations,
-                ColourSource::FixedVertexColours | ColourSource::TemplateAlbedo => 0,
+            albedo: if self.learns_albedo() {
+                self.albedo_iterations
+            } else {
+                0
             },
-            shadow: match self.colours {
-                ColourSource::Field | ColourSource::TemplateAlbedo => self.shadow_iterations,
-                ColourSource::FixedVertexColours | ColourSource::AlbedoOnly => 0,
+            shadow: if self.learns_shading() {
+                self.shadow_iterations
+            } else {
+                0
             },
             refine: self.refine_iterations,
         }

@@ -282,12 +282,9 @@ impl Trainer {
         let Some(mut term) = self.rendering.take() else {
             return Ok(None);
         };
-        let colouring = match (&term.fixed, term.config.colours) {
-            (Some(t), _) => Colouring::Fixed(t),
-            (None, c) => Colouring::Frozen(
-                &term.appearance,
-                matches!(c, ColourSource::Field | ColourSource::TemplateAlbedo),
-            ),
+        let colouring = match &term.fixed {
+            Some(t) => Colouring::Fixed(t),
+            None => Colouring::Frozen(&term.appearance, term.config.learns_shading()),
         };
         let result = self.rendering_mean(
             &term.images,
@@ -395,23 +392,24 @@ impl Trainer {
         if !config.renders() {
             // Stage 4 without the rendering term reads no image.
             images.clear();
-        } else if !self.validation.is_empty()
-            && images.len() == self.data.frames.len() + self.validation.len()
-        {
-            // Images of every training frame, as `load_images` reads them: the frames held out
-            // for validation take no part in stages 2–4.
-            super::validation::take_held_out(&mut images, self.config.validation_frames);
-        }
-        if config.renders()
-            && (images.len() != self.data.frames.len()
+        } else {
+            if !self.validation.is_empty()
+                && images.len() == self.data.frames.len() + self.validation.len()
+            {
+                // Images of every training frame, as `load_images` reads them: the frames held
+                // out for validation take no part in stages 2–4.
+                super::validation::take_held_out(&mut images, self.config.validation_frames);
+            }
+            if images.len() != self.data.frames.len()
                 || images
                     .iter()
                     .zip(&self.data.frames)
-                    .any(|(i, f)| i.len() != f.views.len()))
-        {
-            return Err(TrainError::Data(
-                "colour images do not match the training frames and views".into(),
-            ));
+                    .any(|(i, f)| i.len() != f.views.len())
+            {
+                return Err(TrainError::Data(
+                    "colour images do not match the training frames and views".into(),
+                ));
+            }
         }
         let net_config = *self
             .net()
