@@ -458,16 +458,19 @@ impl Trainer {
     /// The learning rate of image iteration `done` (0-based). Stage 1: a linear ramp over
     /// `lr_warmup` iterations, then a half cosine from the full rate down to `lr_final_fraction`
     /// of it at its last iteration. Stage 4 (iterations past stage 1's) follows the same
-    /// cosine over its own iterations, without the ramp.
+    /// cosine over its own iterations, without the ramp, scaled by
+    /// [`StageConfig::refine_lr_fraction`](stages::StageConfig::refine_lr_fraction).
     fn image_lr(&self, done: u64) -> f64 {
         let base = Self::adam_config(&self.config, self.is_static()).lr;
-        let (ramp, start, len) = if done < self.config.iterations {
-            (self.config.lr_warmup, 0, self.config.iterations)
+        let (ramp, start, len, peak) = if done < self.config.iterations {
+            (self.config.lr_warmup, 0, self.config.iterations, 1.0)
         } else {
+            let s = &self.config.stages;
             (
                 0,
                 self.config.iterations,
-                self.config.stages.refine_iterations,
+                s.refine_iterations,
+                s.refine_lr_fraction,
             )
         };
         let k = done - start;
@@ -480,7 +483,7 @@ impl Trainer {
         let t = (k.saturating_sub(ramp) as f64 / span).min(1.0);
         let f = self.config.lr_final_fraction;
         let cosine = f + (1.0 - f) * 0.5 * (1.0 + (core::f64::consts::PI * t).cos());
-        base * warm * cosine
+        base * peak * warm * cosine
     }
 
     fn is_static(&self) -> bool {

@@ -54,6 +54,14 @@ pub struct StageConfig {
     /// and Laplacian where the 2,500-vertex template could only interpolate. See
     /// `docs/experiments/fidelity.md`, *Stage 4 at full resolution*.
     pub full_resolution: bool,
+    /// Stage 4's learning rate as a fraction of stage 1's: stage 4 follows stage 1's half
+    /// cosine (from `adam.lr` down to `lr_final_fraction` of it, without the warm-up ramp)
+    /// over its own iterations, scaled by this. Restarting at the full rate undid part of a
+    /// short stage 1 (the zoo's 400 iterations: 0.722 cm against 0.612 at one half, and a
+    /// vertex 1.07 cm off the surface beyond bone heat's worst); after the demo's 1,000 it
+    /// gained 0.011 cm more than one half does (three seeds). See
+    /// `docs/experiments/fidelity.md`, *Stage 4's learning rate*.
+    pub refine_lr_fraction: f64,
 }
 
 impl Default for StageConfig {
@@ -69,6 +77,7 @@ impl Default for StageConfig {
             appearance_lr: 1e-3,
             image_blur_px: 2.0,
             full_resolution: false,
+            refine_lr_fraction: 0.5,
         }
     }
 }
@@ -145,6 +154,9 @@ impl StageConfig {
     pub fn validate(&self) -> Result<(), &'static str> {
         if !(self.rendering_weight.is_finite() && self.rendering_weight >= 0.0) {
             return Err("stages.rendering_weight");
+        }
+        if !(self.refine_lr_fraction.is_finite() && self.refine_lr_fraction > 0.0) {
+            return Err("stages.refine_lr_fraction");
         }
         if !(self.appearance_lr.is_finite() && self.appearance_lr > 0.0) {
             return Err("stages.appearance_lr");
