@@ -323,14 +323,34 @@ fn stage_config_reads_from_json_and_names_bad_fields() {
         Some("100 stage-4 iterations at full resolution")
     );
     assert_eq!(StageConfig::default().refine_summary(), None);
-    std::fs::write(&p, r#"{"stages": {"rendering_weight": -1}}"#).unwrap();
-    assert!(matches!(
-        TrainConfig::load(&p),
-        Err(crate::train::ConfigError::Field {
-            field: "stages.rendering_weight",
-            ..
-        })
-    ));
+    for (json, bad) in [
+        (
+            r#"{"stages": {"rendering_weight": -1}}"#,
+            "stages.rendering_weight",
+        ),
+        (
+            r#"{"stages": {"refine_lr_fraction": 0}}"#,
+            "stages.refine_lr_fraction",
+        ),
+        (
+            r#"{"stages": {"refine_lr_fraction": -0.5}}"#,
+            "stages.refine_lr_fraction",
+        ),
+    ] {
+        std::fs::write(&p, json).unwrap();
+        assert!(
+            matches!(
+                TrainConfig::load(&p),
+                Err(crate::train::ConfigError::Field { field, .. }) if field == bad
+            ),
+            "{json}"
+        );
+    }
+    std::fs::write(&p, r#"{"stages": {"refine_lr_fraction": 0.25}}"#).unwrap();
+    assert_eq!(
+        TrainConfig::load(&p).unwrap().stages.refine_lr_fraction,
+        0.25
+    );
 }
 
 /// `load_images` returns the capture's images as they are without blur, and with blur changes
