@@ -30,7 +30,7 @@ use skinfield_trainer::train::data::{DataOptions, TrainData, train_data};
 use skinfield_trainer::train::stages::{ColourSource, StageConfig, load_images};
 use skinfield_trainer::train::{LossWeights, TrainConfig, Trainer};
 
-use super::train::train_static;
+use super::train::{full_template_data, train_static};
 
 /// The row every other is compared with: all four stages, every camera.
 pub const FULL_METHOD: &str = "ours";
@@ -164,17 +164,12 @@ pub fn run(
             cameras,
         };
         let data = train_data(capture, initial, &options)?;
-        // Stages 2–4 on the full template: built once, every variant resumes stage 1 onto it.
-        let stage_data = full
-            .full_resolution
-            .then(|| {
-                let every_vertex = DataOptions {
-                    train_vertices: 0,
-                    ..options
-                };
-                train_data(capture, initial, &every_vertex)
-            })
-            .transpose()?;
+        // Stages 2–4 on the full template: built once (unless stage 1 already trains on it),
+        // every variant resumes stage 1 onto it.
+        let stage_data = (full.full_resolution
+            && data.template.vertex_count() != capture.template.vertex_count())
+        .then(|| full_template_data(capture, initial, &options))
+        .transpose()?;
         let stage_data = stage_data.as_ref().unwrap_or(&data);
         let images = load_images(capture, &options, full.image_blur_px)?;
         let stage1_dir = out.join(format!("ablation-stage1-cams{cameras}"));

@@ -195,14 +195,24 @@ pub fn for_stages(
     {
         return Ok(trainer);
     }
+    let data = full_template_data(capture, initial, options)?;
+    trainer
+        .with_data(data)
+        .context("moving SkinNet to the full-resolution template for stages 2–4")
+}
+
+/// The training data of `options` rebuilt on the capture's full-resolution template (every
+/// vertex a training vertex): what `stages.full_resolution` trains stages 2–4 on.
+pub fn full_template_data(
+    capture: &Capture,
+    initial: &StaticSkin,
+    options: &DataOptions,
+) -> anyhow::Result<TrainData> {
     let full = DataOptions {
         train_vertices: 0,
         ..*options
     };
-    let data = train_data(capture, initial, &full)?;
-    trainer
-        .with_data(data)
-        .context("moving SkinNet to the full-resolution template for stages 2–4")
+    Ok(train_data(capture, initial, &full)?)
 }
 
 /// Stage 1 as an ensemble ([`skinfield_trainer::train::ensemble`]): every member trained in
