@@ -10,7 +10,9 @@ use anyhow::Context;
 use clap::Parser;
 use skinfield_formats::capture::load_capture;
 use skinfield_formats::skf::write_atomic;
-use skinfield_trainer::eval::diagnostics::{diagnostics_markdown, part_errors, terms_on_truth};
+use skinfield_trainer::eval::diagnostics::{
+    diagnostics_markdown, outline_errors, part_errors, terms_on_truth, truth_outline_views,
+};
 use skinfield_trainer::eval::figure::{Panel, write_error_figure};
 use skinfield_trainer::eval::spread::{spread, spread_table};
 use skinfield_trainer::eval::table::{EvalRow, rows_to_json, rows_to_table};
@@ -248,7 +250,8 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         .collect::<anyhow::Result<_>>()?;
     timings.push(("evaluate", t.elapsed().as_secs_f64()));
 
-    // Diagnostics: per-part errors, and the image terms on the truth vs on each method.
+    // Diagnostics: per-part errors, the same split by what the training outlines see, and the
+    // image terms on the truth vs on each method.
     let t = Instant::now();
     let compared = [
         Skinning::Initial,
@@ -259,11 +262,23 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         .iter()
         .map(|m| Ok((m.method_name().to_string(), part_errors(&capture, m)?)))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let outline = match truth_outline_views(&capture)? {
+        Some(views) => compared
+            .iter()
+            .map(|m| {
+                Ok((
+                    m.method_name().to_string(),
+                    outline_errors(&capture, m, &views)?,
+                ))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?,
+        None => Vec::new(),
+    };
     let terms = terms_on_truth(&capture, &compared, DIAGNOSTIC_STRIDE)?;
     let diagnostics_path = out.join("diagnostics.md");
     write_atomic(
         &diagnostics_path,
-        diagnostics_markdown(&parts, &terms, DIAGNOSTIC_STRIDE).as_bytes(),
+        diagnostics_markdown(&parts, &outline, &terms, DIAGNOSTIC_STRIDE).as_bytes(),
     )
     .with_context(|| diagnostics_path.display().to_string())?;
     timings.push(("diagnostics", t.elapsed().as_secs_f64()));

@@ -4,6 +4,9 @@
 //! - **per-part errors**: each method's mean and worst per-vertex distance to the ground truth
 //!   on the test frames, for the template's skin and clothing vertices separately (a gain on
 //!   the skirt and a loss on the arms average out in the table's Chamfer);
+//! - **errors where the training outlines see, and where they do not**: the same figures for
+//!   the vertices on the outline of the ground-truth mesh in at least one training view and for
+//!   the rest, whose weights the silhouettes cannot see;
 //! - **the image terms on the truth**: the silhouette distance and IoU of the ground-truth
 //!   meshes against the training masks, next to each method's. The truth should score lowest;
 //!   a method scoring below the truth is fitting the masks with a wrong shape, and a truth
@@ -19,8 +22,8 @@ use skinfield_formats::PartLabel;
 use skinfield_formats::capture::Capture;
 
 use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s, sorted_influences};
-use crate::losses::silhouette::EdgeTable;
-use crate::train::data::{DataError, DataOptions, initial_weights, train_data};
+use crate::losses::silhouette::{DEFAULT_HUBER_PX, EdgeTable, view_terms};
+use crate::train::data::{DataError, DataOptions, TrainData, initial_weights, train_data};
 use crate::train::validation::{ValidationScore, score_posed};
 
 /// A diagnostic could not be computed.
@@ -49,7 +52,6 @@ pub struct PartError {
 
 /// Per-part errors of `skinning` on the capture's test frames.
 pub fn part_errors(capture: &Capture, skinning: &Skinning) -> Result<Vec<PartError>, EvalError> {
-    let prepared = PreparedSkinning::new(capture, skinning)?;
     let labels: Vec<&'static str> = match &capture.template.part_labels {
         Some(l) => l
             .iter()
@@ -60,8 +62,41 @@ pub fn part_errors(capture: &Capture, skinning: &Skinning) -> Result<Vec<PartErr
             .collect(),
         None => vec!["all"; capture.template.vertex_count()],
     };
+    grouped_errors(capture, skinning, &labels)
+}
+
+/// The name of the vertices that lie on a true training outline (see [`truth_outline_views`]).
+pub const SEEN: &str = "on a training outline";
+/// The name of the vertices that lie on none.
+pub const HIDDEN: &str = "on no training outline";
+
+/// Errors of `skinning` on the capture's test frames, split between the vertices that lie on
+/// the outline of at least one training view (`views[i] > 0`, [`SEEN`]) and the rest
+/// ([`HIDDEN`]): the silhouettes say something about the first group's weights and nothing
+/// about the second's, which rests on the warm start, the regularisers and what the shared
+/// network carries over from the vertices it sees.
+pub fn outline_errors(
+    capture: &Capture,
+    skinning: &Skinning,
+    views: &[u32],
+) -> Result<Vec<PartError>, EvalError> {
+    let labels: Vec<&'static str> = views
+        .iter()
+        .map(|&n| if n > 0 { SEEN } else { HIDDEN })
+        .collect();
+    grouped_errors(capture, skinning, &labels)
+}
+
+/// Mean and worst per-vertex distance to the true surface over the test frames, per group of
+/// vertices (`labels[i]` names vertex `i`'s group; groups in order of first appearance).
+fn grouped_errors(
+    capture: &Capture,
+    skinning: &Skinning,
+    labels: &[&'static str],
+) -> Result<Vec<PartError>, EvalError> {
+    let prepared = PreparedSkinning::new(capture, skinning)?;
     let mut parts: Vec<&'static str> = Vec::new();
-    for &l in &labels {
+    for &l in labels {
         if !parts.contains(&l) {
             parts.push(l);
         }
@@ -72,7 +107,7 @@ pub fn part_errors(capture: &Capture, skinning: &Skinning) -> Result<Vec<PartErr
     for &f in &capture.test_frames {
         let posed = prepared.pose_frame(capture, f)?;
         let d = per_vertex_m2s(capture, f, &posed)?;
-        for (dist, label) in d.iter().zip(&labels) {
+        for (dist, label) in d.iter().zip(labels) {
             let k = parts.iter().position(|p| p == label).unwrap_or(0);
             let cm = 100.0 * f64::from(*dist);
             sum[k] += cm;
@@ -91,6 +126,70 @@ pub fn part_errors(capture: &Capture, skinning: &Skinning) -> Result<Vec<PartErr
             worst_cm: worst[k],
         })
         .collect())
+}
+
+/// For every template vertex, how many training views (frame × camera) have it on the outline
+/// of the ground-truth posed mesh: a contour generator that reaches the mask's outline, the
+/// silhouette loss's boundary set at the truth (`None` when the capture has no ground truth for
+/// its training frames). A vertex at 0 is hidden from every training view (under clothing,
+/// between the legs) or always faces a camera: the silhouettes cannot see its weights.
+pub fn truth_outline_views(capture: &Capture) -> Result<Option<Vec<u32>>, DiagnosticsError> {
+    let (data, truth) = frames_with_truth(capture, 1)?;
+    let Some(truth) = truth else {
+        return Ok(None);
+    };
+    let triangles = &capture.template.triangles;
+    let edges = EdgeTable::new(capture.template.vertex_count(), triangles);
+    let mut views = vec![0u32; capture.template.vertex_count()];
+    for (frame, posed) in data.frames.iter().zip(&truth) {
+        for view in &frame.views {
+            let terms = view_terms(
+                &view.camera,
+                &view.target,
+                posed,
+                triangles,
+                &edges,
+                DEFAULT_HUBER_PX,
+            );
+            for &i in &terms.boundary_vertices {
+                views[i as usize] += 1;
+            }
+        }
+    }
+    Ok(Some(views))
+}
+
+/// The ground-truth posed template of each of a list of frames.
+type TruthMeshes = Vec<Vec<Vec3>>;
+
+/// Every `stride`-th training frame at full template resolution (masks, cameras, targets) and
+/// the ground-truth posed meshes of those frames (`None` where the capture has none).
+fn frames_with_truth(
+    capture: &Capture,
+    stride: usize,
+) -> Result<(TrainData, Option<TruthMeshes>), DiagnosticsError> {
+    let mut sub = capture.clone();
+    sub.train_frames = capture
+        .train_frames
+        .iter()
+        .copied()
+        .step_by(stride.max(1))
+        .collect();
+    let initial = initial_weights(&sub)?;
+    let data = train_data(
+        &sub,
+        &initial,
+        &DataOptions {
+            train_vertices: 0,
+            ..DataOptions::default()
+        },
+    )?;
+    let truth: Result<TruthMeshes, _> = sub
+        .train_frames
+        .iter()
+        .map(|&f| capture.evaluation_gt_mesh(f))
+        .collect();
+    Ok((data, truth.ok()))
 }
 
 /// The vertex of one test frame furthest from its ground-truth position.
@@ -238,31 +337,11 @@ pub fn terms_on_truth(
     methods: &[Skinning],
     stride: usize,
 ) -> Result<Vec<(String, ValidationScore)>, DiagnosticsError> {
-    let mut sub = capture.clone();
-    sub.train_frames = capture
-        .train_frames
-        .iter()
-        .copied()
-        .step_by(stride.max(1))
-        .collect();
-    let initial = initial_weights(&sub)?;
-    let data = train_data(
-        &sub,
-        &initial,
-        &DataOptions {
-            train_vertices: 0,
-            ..DataOptions::default()
-        },
-    )?;
     let triangles = &capture.template.triangles;
     let edges = EdgeTable::new(capture.template.vertex_count(), triangles);
     let mut rows = Vec::new();
-    let truth: Result<Vec<Vec<Vec3>>, _> = sub
-        .train_frames
-        .iter()
-        .map(|&f| capture.evaluation_gt_mesh(f))
-        .collect();
-    if let Ok(truth) = truth {
+    let (data, truth) = frames_with_truth(capture, stride)?;
+    if let Some(truth) = truth {
         rows.push((
             "truth".to_string(),
             score_posed(&data.frames, &truth, triangles, &edges),
@@ -270,9 +349,7 @@ pub fn terms_on_truth(
     }
     for m in methods {
         let prepared = PreparedSkinning::new(capture, m)?;
-        let posed = sub
-            .train_frames
-            .iter()
+        let posed = (capture.train_frames.iter().step_by(stride.max(1)))
             .map(|&f| prepared.pose_frame(capture, f))
             .collect::<Result<Vec<_>, _>>()?;
         rows.push((
@@ -283,10 +360,12 @@ pub fn terms_on_truth(
     Ok(rows)
 }
 
-/// Both diagnostics as Markdown.
+/// The diagnostics as Markdown: per-part errors, the same split by what the training outlines
+/// see (`outline`, left out when empty), and the image terms.
 #[must_use]
 pub fn diagnostics_markdown(
     parts: &[(String, Vec<PartError>)],
+    outline: &[(String, Vec<PartError>)],
     terms: &[(String, ValidationScore)],
     stride: usize,
 ) -> String {
@@ -296,16 +375,18 @@ pub fn diagnostics_markdown(
         s,
         "Mean and worst per-vertex distance to the ground-truth surface (cm).\n"
     );
-    let _ = writeln!(s, "| method | part | vertices | mean (cm) | worst (cm) |");
-    let _ = writeln!(s, "| --- | --- | --- | --- | --- |");
-    for (method, rows) in parts {
-        for p in rows {
-            let _ = writeln!(
-                s,
-                "| {method} | {} | {} | {:.3} | {:.2} |",
-                p.part, p.vertices, p.mean_cm, p.worst_cm
-            );
-        }
+    part_table(&mut s, parts);
+    if !outline.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n## Errors where the training outlines see, and where they do not\n\n\
+             The same figures for the vertices that lie on the outline of the ground-truth mesh \
+             in at least one training view and for those that lie on none (under clothing, \
+             between the legs): the silhouettes cannot see the second group's weights, which \
+             rest on the warm start, the regularisers and what the network carries over from \
+             the vertices it sees.\n"
+        );
+        part_table(&mut s, outline);
     }
     let _ = writeln!(
         s,
@@ -327,6 +408,21 @@ pub fn diagnostics_markdown(
         );
     }
     s
+}
+
+/// One Markdown table of per-group errors, a row per method and group.
+fn part_table(s: &mut String, parts: &[(String, Vec<PartError>)]) {
+    let _ = writeln!(s, "| method | part | vertices | mean (cm) | worst (cm) |");
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- |");
+    for (method, rows) in parts {
+        for p in rows {
+            let _ = writeln!(
+                s,
+                "| {method} | {} | {} | {:.3} | {:.2} |",
+                p.part, p.vertices, p.mean_cm, p.worst_cm
+            );
+        }
+    }
 }
 
 #[cfg(test)]
@@ -454,7 +550,60 @@ mod tests {
             truth.silhouette_px < initial.silhouette_px && truth.iou > initial.iou,
             "{truth} vs {initial}"
         );
-        let md = diagnostics_markdown(&[], &rows, 1);
+        let md = diagnostics_markdown(&[], &[], &rows, 1);
         assert!(md.contains("| truth |") && md.contains("| initial |"));
+    }
+    #[test]
+    fn outline_views_count_vertices_on_a_true_outline_and_split_the_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        let views = truth_outline_views(&capture).unwrap().unwrap();
+        let v = capture.template.vertex_count();
+        assert_eq!(views.len(), v);
+        let total = (capture.train_frames.len() * capture.rig.cameras.len()) as u32;
+        assert!(views.iter().all(|&n| n <= total));
+        // Independently of the mesh's contour generators: a counted vertex projects onto the
+        // mask's outline (within a pixel) in at least one training view.
+        let (data, truth) = frames_with_truth(&capture, 1).unwrap();
+        let truth = truth.unwrap();
+        for (i, _) in views.iter().enumerate().filter(|&(_, &n)| n > 0) {
+            let nearest = data
+                .frames
+                .iter()
+                .zip(&truth)
+                .flat_map(|(frame, posed)| {
+                    frame.views.iter().filter_map(move |view| {
+                        let uv = view.camera.project(posed[i])?;
+                        Some(view.target.outline.distance(uv).0)
+                    })
+                })
+                .fold(f32::INFINITY, f32::min);
+            assert!(nearest < 1.0, "vertex {i}: {nearest} px from every outline");
+        }
+        // The skirt hides part of the legs from every view, and the body's outline shows the
+        // rest: both groups are there.
+        let seen = views.iter().filter(|&&n| n > 0).count();
+        assert!(seen > v / 10 && seen < v, "{seen} of {v}");
+        // The two groups partition the vertices, and their vertex-weighted mean is the mean
+        // over every vertex (the per-part split's, which partitions them too).
+        let split = outline_errors(&capture, &Skinning::Initial, &views).unwrap();
+        let mut names: Vec<_> = split.iter().map(|p| p.part).collect();
+        names.sort_unstable();
+        assert_eq!(names, [SEEN, HIDDEN], "{split:?}");
+        assert_eq!(split.iter().map(|p| p.vertices).sum::<usize>(), v);
+        let mean = |rows: &[PartError]| {
+            rows.iter()
+                .map(|p| p.mean_cm * p.vertices as f64)
+                .sum::<f64>()
+                / v as f64
+        };
+        let parts = part_errors(&capture, &Skinning::Initial).unwrap();
+        assert!(
+            (mean(&split) - mean(&parts)).abs() < 1e-9,
+            "{split:?} vs {parts:?}"
+        );
+        let md = diagnostics_markdown(&[], &[("initial".into(), split)], &[], 1);
+        assert!(md.contains(SEEN) && md.contains(HIDDEN), "{md}");
     }
 }
