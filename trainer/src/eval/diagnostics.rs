@@ -71,7 +71,7 @@ pub const SEEN: &str = "on a training outline";
 pub const HIDDEN: &str = "on no training outline";
 
 /// Errors of `skinning` on the capture's test frames, split between the vertices that lie on
-/// the outline of at least one training view (`views[i] > 0`, [`SEEN`]) and the rest
+/// the outline of at least one training view (`views[i] > 0`, [`SEEN`], first) and the rest
 /// ([`HIDDEN`]): the silhouettes say something about the first group's weights and nothing
 /// about the second's, which rests on the warm start, the regularisers and what the shared
 /// network carries over from the vertices it sees.
@@ -84,7 +84,9 @@ pub fn outline_errors(
         .iter()
         .map(|&n| if n > 0 { SEEN } else { HIDDEN })
         .collect();
-    grouped_errors(capture, skinning, &labels)
+    let mut rows = grouped_errors(capture, skinning, &labels)?;
+    rows.sort_by_key(|p| p.part != SEEN);
+    Ok(rows)
 }
 
 /// Mean and worst per-vertex distance to the true surface over the test frames, per group of
@@ -588,8 +590,7 @@ mod tests {
         // The two groups partition the vertices, and their vertex-weighted mean is the mean
         // over every vertex (the per-part split's, which partitions them too).
         let split = outline_errors(&capture, &Skinning::Initial, &views).unwrap();
-        let mut names: Vec<_> = split.iter().map(|p| p.part).collect();
-        names.sort_unstable();
+        let names: Vec<_> = split.iter().map(|p| p.part).collect();
         assert_eq!(names, [SEEN, HIDDEN], "{split:?}");
         assert_eq!(split.iter().map(|p| p.vertices).sum::<usize>(), v);
         let mean = |rows: &[PartError]| {
