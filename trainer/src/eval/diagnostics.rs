@@ -22,7 +22,8 @@ use skinfield_formats::PartLabel;
 use skinfield_formats::capture::Capture;
 
 use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s, sorted_influences};
-use crate::losses::silhouette::{DEFAULT_HUBER_PX, EdgeTable, view_terms};
+use crate::losses::silhouette::EdgeTable;
+use crate::losses::silhouette::edges::{ViewGeometry, mesh_outline};
 use crate::train::data::{DataError, DataOptions, TrainData, initial_weights, train_data};
 use crate::train::validation::{ValidationScore, score_posed};
 
@@ -131,34 +132,26 @@ fn grouped_errors(
 }
 
 /// For every template vertex, how many training views (frame × camera) have it on the outline
-/// of the ground-truth posed mesh: a contour generator that reaches the mask's outline, the
-/// silhouette loss's boundary set at the truth (`None` when the capture has no ground truth for
-/// its training frames). A vertex at 0 is hidden from every training view (under clothing,
+/// of the ground-truth posed mesh: a silhouette edge's end on the mesh's own projected outline,
+/// the silhouette loss's boundary set at the truth (`None` when the capture has no ground truth
+/// for its training frames). Only the cameras and the true meshes are read; the set does not
+/// depend on the masks. A vertex at 0 is hidden from every training view (under clothing,
 /// between the legs) or always faces a camera: the silhouettes cannot see its weights.
-pub fn truth_outline_views(capture: &Capture) -> Result<Option<Vec<u32>>, DiagnosticsError> {
-    let (data, truth) = frames_with_truth(capture, 1)?;
-    let Some(truth) = truth else {
-        return Ok(None);
-    };
+#[must_use]
+pub fn truth_outline_views(capture: &Capture) -> Option<Vec<u32>> {
     let triangles = &capture.template.triangles;
     let edges = EdgeTable::new(capture.template.vertex_count(), triangles);
     let mut views = vec![0u32; capture.template.vertex_count()];
-    for (frame, posed) in data.frames.iter().zip(&truth) {
-        for view in &frame.views {
-            let terms = view_terms(
-                &view.camera,
-                &view.target,
-                posed,
-                triangles,
-                &edges,
-                DEFAULT_HUBER_PX,
-            );
-            for &i in &terms.boundary_vertices {
+    for &frame in &capture.train_frames {
+        let posed = capture.evaluation_gt_mesh(frame).ok()?;
+        for camera in &capture.rig.cameras {
+            let geometry = ViewGeometry::new(camera, &posed);
+            for i in mesh_outline(camera, &posed, triangles, &edges, &geometry).vertices {
                 views[i as usize] += 1;
             }
         }
     }
-    Ok(Some(views))
+    Some(views)
 }
 
 /// The ground-truth posed template of each of a list of frames.
@@ -560,7 +553,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
         let capture = load_capture(dir.path()).unwrap();
-        let views = truth_outline_views(&capture).unwrap().unwrap();
+        let views = truth_outline_views(&capture).unwrap();
         let v = capture.template.vertex_count();
         assert_eq!(views.len(), v);
         let total = (capture.train_frames.len() * capture.rig.cameras.len()) as u32;
