@@ -39,10 +39,16 @@ pub struct Args {
     /// `OUT/ablations_seeds.json`).
     #[arg(long, default_value_t = 1)]
     pub seeds: u64,
+    /// Training configuration (JSON, `TrainConfig` fields, as `trainer train --config`) that
+    /// SkinNet and the static baseline start from instead of the trainer's defaults. `--seed`,
+    /// `--iterations` and `--static-iterations` always set their fields; `--warm-start` and
+    /// `--ensemble` override the file's only when given.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Cap of SkinNet's warm start (regressing the initial weights; it stops earlier once
-    /// converged).
-    #[arg(long, default_value_t = TrainConfig::default().warm_start_iterations)]
-    pub warm_start: u64,
+    /// converged). Default: the configuration's (the trainer's: 3,000).
+    #[arg(long)]
+    pub warm_start: Option<u64>,
     /// SkinNet image-loss iterations.
     #[arg(long, default_value_t = 1000)]
     pub iterations: u64,
@@ -55,8 +61,9 @@ pub struct Args {
     /// SkinNets trained from consecutive seeds (each with the whole warm start and image
     /// schedule) whose mean weights are distilled into the exported one (`ensemble.members`
     /// of the training configuration); 1: a single network. Not used by `--ablations`.
-    #[arg(long, default_value_t = TrainConfig::default().ensemble.members)]
-    pub ensemble: usize,
+    /// Default: the configuration's (the trainer's: 1).
+    #[arg(long)]
+    pub ensemble: Option<usize>,
     /// Hide the progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -67,8 +74,10 @@ pub struct Args {
 
 /// Runs `trainer demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // Read before anything is synthesised, so a bad file fails at once.
+    let base = base_config(&args)?;
     if args.seeds <= 1 {
-        return run_seed(&args, args.seed, &args.out).map(|_| ());
+        return run_seed(&args, &base, args.seed, &args.out).map(|_| ());
     }
     let total = Instant::now();
     let mut runs = Vec::new();
@@ -76,6 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("== seed {seed}");
         runs.push(run_seed(
             &args,
+            &base,
             seed,
             &args.out.join(format!("seed-{seed}")),
         )?);
@@ -106,6 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.seed + args.seeds - 1
     );
     let _ = writeln!(md, "{table}");
+    let _ = writeln!(md, "{}", config_sentence(&args));
     let _ = writeln!(md, "Total: {:.1} s.", total.elapsed().as_secs_f64());
     let md_path = args.out.join(format!("{name}.md"));
     write_atomic(&md_path, md.as_bytes()).with_context(|| md_path.display().to_string())?;
@@ -129,9 +140,47 @@ const MAX_ERROR_CM: f32 = 2.0;
 /// The ceiling the table's gap shares are measured against.
 const BOUND: &str = "bound-pose";
 
+/// The training configuration every seed starts from: `--config` (or the trainer's defaults)
+/// with the demo's flags applied; the seed is set per run.
+fn base_config(args: &Args) -> anyhow::Result<TrainConfig> {
+    let file = match &args.config {
+        Some(path) => TrainConfig::load(path)?,
+        None => TrainConfig::default(),
+    };
+    let config = TrainConfig {
+        iterations: args.iterations,
+        warm_start_iterations: args.warm_start.unwrap_or(file.warm_start_iterations),
+        ensemble: EnsembleConfig {
+            members: args.ensemble.unwrap_or(file.ensemble.members),
+            ..file.ensemble
+        },
+        ..file
+    };
+    config.validate().map_err(|field| {
+        anyhow::anyhow!("the arguments make an invalid training configuration: field `{field}`")
+    })?;
+    Ok(config)
+}
+
+/// Where the training configuration came from, for the results files.
+fn config_sentence(args: &Args) -> String {
+    match &args.config {
+        Some(path) => format!(
+            "Training configuration: `{}` (with the demo's flags applied).\n",
+            path.display()
+        ),
+        None => "Training configuration: the trainer's defaults.\n".to_string(),
+    }
+}
+
 /// The demo (or with `--ablations` the ablation table) for one seed in `out`; returns its
 /// table.
-fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec<EvalRow>> {
+fn run_seed(
+    args: &Args,
+    base: &TrainConfig,
+    seed: u64,
+    out: &std::path::Path,
+) -> anyhow::Result<Vec<EvalRow>> {
     let total = Instant::now();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let capture_dir = out.join("capture");
@@ -163,17 +212,8 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
     let model = out.join("model.skf");
     let config = TrainConfig {
         seed,
-        iterations: args.iterations,
-        warm_start_iterations: args.warm_start,
-        ensemble: EnsembleConfig {
-            members: args.ensemble,
-            ..EnsembleConfig::default()
-        },
-        ..TrainConfig::default()
+        ..base.clone()
     };
-    config.validate().map_err(|field| {
-        anyhow::anyhow!("the arguments make an invalid training configuration: field `{field}`")
-    })?;
     let options = DataOptions {
         train_vertices: args.train_vertices,
         ..DataOptions::default()
@@ -203,7 +243,8 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         &model,
         false,
         !args.quiet,
-    )?;
+    )?
+    .seconds;
     timings.push((
         "train SkinNet (data + loop + export)",
         t.elapsed().as_secs_f64(),
@@ -380,6 +421,7 @@ fn run_seed(args: &Args, seed: u64, out: &std::path::Path) -> anyhow::Result<Vec
         options.samples
     );
     let _ = writeln!(md, "```\n{table}```\n");
+    let _ = writeln!(md, "{}", config_sentence(args));
     let _ = writeln!(md, "| step | seconds |\n| --- | --- |");
     for (step, s) in &timings {
         let _ = writeln!(md, "| {step} | {s:.1} |");
@@ -437,5 +479,98 @@ fn iterations_run(work: &Path, config: &TrainConfig) -> (u64, u64) {
         (warm, members as u64 * config.iterations)
     } else {
         (warm_rows(work), config.iterations)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(extra: &[&str]) -> Args {
+        Args::try_parse_from(std::iter::once("demo").chain(extra.iter().copied()))
+            .expect("valid demo arguments")
+    }
+
+    #[test]
+    fn without_a_file_the_demo_trains_on_the_trainers_defaults_at_its_own_budget() {
+        let config = base_config(&args(&[])).unwrap();
+        assert_eq!(
+            config,
+            TrainConfig {
+                iterations: 1000,
+                ..TrainConfig::default()
+            }
+        );
+    }
+
+    #[test]
+    fn a_config_file_sets_every_field_but_the_demos_budget() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.json");
+        std::fs::write(
+            &path,
+            r#"{"iterations": 50, "warm_start_iterations": 1234,
+                "warm_start_kl_tolerance": 0.002, "ensemble": {"members": 2}}"#,
+        )
+        .unwrap();
+        let p = path.to_str().unwrap();
+        let config = base_config(&args(&["--config", p])).unwrap();
+        assert_eq!(config.warm_start_kl_tolerance, 0.002);
+        assert_eq!(config.warm_start_iterations, 1234);
+        assert_eq!(config.ensemble.members, 2);
+        // `--iterations` has the demo's default, which the file does not override.
+        assert_eq!(config.iterations, 1000);
+        let config = base_config(&args(&[
+            "--config",
+            p,
+            "--warm-start",
+            "77",
+            "--ensemble",
+            "1",
+            "--iterations",
+            "9",
+        ]))
+        .unwrap();
+        assert_eq!(
+            (
+                config.warm_start_iterations,
+                config.ensemble.members,
+                config.iterations
+            ),
+            (77, 1, 9)
+        );
+        assert_eq!(config.warm_start_kl_tolerance, 0.002);
+        assert!(config_sentence(&args(&["--config", p])).contains(p));
+    }
+
+    #[test]
+    fn a_bad_config_file_is_refused_naming_the_file_and_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.json");
+        std::fs::write(&path, r#"{"warm_start_kl_tolerance": -1}"#).unwrap();
+        let p = path.to_str().unwrap();
+        let e = base_config(&args(&["--config", p]))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(p) && e.contains("warm_start_kl_tolerance"),
+            "{e}"
+        );
+        std::fs::write(&path, r#"{"no_such_field": 1}"#).unwrap();
+        let e = base_config(&args(&["--config", p]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(p) && e.contains("no_such_field"), "{e}");
+        let missing = dir.path().join("missing.json");
+        let e = base_config(&args(&["--config", missing.to_str().unwrap()])).unwrap_err();
+        // The whole chain, as `trainer` prints it, names the file and the cause once.
+        let e = format!("{e:#}");
+        assert!(e.contains("missing.json"), "{e}");
+        assert_eq!(e.matches("os error").count(), 1, "{e}");
+        // Flags that make an invalid configuration are refused too.
+        let e = base_config(&args(&["--ensemble", "0"]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("ensemble"), "{e}");
     }
 }
