@@ -92,6 +92,10 @@ fn zoo_writes_one_table_with_the_robot() {
         assert!(row["max_vertex_cm"].as_f64().unwrap() > 0.0);
     }
     assert_eq!(robot["worst_vertex_ours"]["frames"], 3);
+    // A warm start of one iteration cannot converge (the test averages over 50): the table
+    // says it stopped at its cap.
+    assert_eq!(robot["warm_start"]["iterations"], 1);
+    assert_eq!(robot["warm_start"]["converged"], false);
     let md = std::fs::read_to_string(out.join("zoo.md")).unwrap();
     assert_eq!(std::fs::read_to_string(&doc).unwrap(), md);
     assert!(doc.with_extension("json").is_file());
@@ -100,6 +104,10 @@ fn zoo_writes_one_table_with_the_robot() {
     );
     assert!(md.contains("novel: Wave, ThumbsUp, Jump (3 frames)"));
     assert!(md.contains("Chamfer (% of size)") && md.contains("| oracle |"));
+    assert!(
+        md.contains("| **no**: stopped at its cap of 1 iteration (KL "),
+        "{md}"
+    );
     // The configuration and the command that reproduce the table are named in it.
     assert!(
         md.contains(

@@ -15,7 +15,7 @@ use skinfield_trainer::train::data::{
 use skinfield_trainer::train::plot::plot_log;
 use skinfield_trainer::train::stages::load_images;
 use skinfield_trainer::train::validation::held_out_indices;
-use skinfield_trainer::train::{TrainConfig, Trainer};
+use skinfield_trainer::train::{TrainConfig, Trainer, WarmStatus};
 
 /// Arguments of `trainer train`.
 #[derive(Parser, Debug)]
@@ -100,6 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.resume,
             !args.quiet,
         )?
+        .seconds
     };
     println!(
         "wrote {} ({seconds:.1} s of training; losses in {})",
@@ -120,9 +121,17 @@ pub fn default_work_dir(out: &Path) -> PathBuf {
     out.with_file_name(name)
 }
 
+/// What [`train_skinnet`] reports about a finished run.
+#[derive(Clone, Copy, Debug)]
+pub struct SkinNetRun {
+    /// Seconds spent in the optimisation loops.
+    pub seconds: f64,
+    /// How the warm start ended (with an ensemble, the distillation of the members' mean).
+    pub warm_start: WarmStatus,
+}
+
 /// Trains SkinNet on the capture's training frames (stages 2–4 too when `config.stages` has
-/// iterations) and writes the `.skf` (with the appearance nets after stages 2–4); returns the
-/// seconds spent in the optimisation loops.
+/// iterations) and writes the `.skf` (with the appearance nets after stages 2–4).
 #[allow(clippy::too_many_arguments)]
 pub fn train_skinnet(
     capture: &Capture,
@@ -133,7 +142,7 @@ pub fn train_skinnet(
     out: &Path,
     resume: bool,
     progress: bool,
-) -> anyhow::Result<f64> {
+) -> anyhow::Result<SkinNetRun> {
     let data = train_data(capture, initial, options)?;
     let start = Instant::now();
     let mut trainer = if config.ensemble.is_on() {
@@ -147,6 +156,7 @@ pub fn train_skinnet(
         report_warm_start(&trainer);
         trainer
     };
+    let warm_start = trainer.warm_status();
     // The average of stage 1's iterates is the model; stages 2–4 continue from it.
     trainer.adopt_average()?;
     let mut trainer = for_stages(trainer, capture, initial, options)?;
@@ -177,7 +187,10 @@ pub fn train_skinnet(
         a.push_to_skf(&mut model)?;
     }
     model.write(out)?;
-    Ok(seconds)
+    Ok(SkinNetRun {
+        seconds,
+        warm_start,
+    })
 }
 
 /// `trainer` after stage 1, ready for stages 2–4: with `stages.full_resolution` moved onto the

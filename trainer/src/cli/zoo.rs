@@ -26,8 +26,8 @@ use skinfield_trainer::eval::{
 use skinfield_trainer::synth::{
     GltfSource, SynthConfig, SynthSummary, TestMotions, synthesize, synthesize_gltf,
 };
-use skinfield_trainer::train::TrainConfig;
 use skinfield_trainer::train::data::{DataOptions, initial_weights};
+use skinfield_trainer::train::{TrainConfig, WarmStatus};
 
 use super::train::{train_skinnet, train_static};
 
@@ -228,6 +228,8 @@ pub struct ZooResult {
     pub frames: (usize, usize),
     /// initial / static / ours / oracle.
     pub rows: Vec<EvalRow>,
+    /// How SkinNet's warm start ended (with an ensemble, the distillation), when it ran.
+    pub warm_start: Option<WarmStatus>,
     /// Whether ours < static < initial in Chamfer distance.
     pub ordering_holds: Option<bool>,
     /// Ours' vertex furthest from the true surface against bone heat's, frame by frame.
@@ -459,6 +461,7 @@ fn run_character(
         test,
         frames: (0, 0),
         rows: Vec::new(),
+        warm_start: None,
         ordering_holds: None,
         off_surface_ours: None,
         off_surface_static: None,
@@ -586,12 +589,16 @@ fn fill_character(
     let oracle_seconds = Instant::now();
     let oracle = eval(&Skinning::Oracle)?;
     eval_seconds += oracle_seconds.elapsed().as_secs_f64();
-    if let Err(e) = skinnet {
-        rows.push(oracle);
-        result.rows = rows;
-        result.seconds.eval = eval_seconds;
-        return Err(e);
-    }
+    let skinnet = match skinnet {
+        Ok(run) => run,
+        Err(e) => {
+            rows.push(oracle);
+            result.rows = rows;
+            result.seconds.eval = eval_seconds;
+            return Err(e);
+        }
+    };
+    result.warm_start = Some(skinnet.warm_start);
     let t = Instant::now();
     rows.push(eval(&Skinning::Skf(model))?);
     rows.push(oracle);

@@ -60,7 +60,7 @@ pub struct WarmRecord {
 }
 
 /// Where the warm start stands.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct WarmStatus {
     /// Iterations run.
     pub iterations: u64,

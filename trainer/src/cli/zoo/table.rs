@@ -7,6 +7,7 @@ use anyhow::Context;
 use serde::Serialize;
 use skinfield_formats::skf::write_atomic;
 use skinfield_trainer::eval::percent_of_size;
+use skinfield_trainer::train::WarmStatus;
 
 use super::{Args, Budget, CheckSummary, ZooResult};
 
@@ -29,6 +30,28 @@ fn thousands(n: usize) -> String {
         out.push(c);
     }
     out
+}
+
+/// How SkinNet's warm start ended, as a table cell: converged after how many iterations, or
+/// stopped at its cap (a failure: the image losses then start away from bone heat), with the
+/// last window's KL and position error either way. `–` when it did not run.
+fn warm_start_cell(warm: Option<&WarmStatus>) -> String {
+    match warm {
+        None => "–".to_string(),
+        Some(w) if w.iterations == 0 => "–".to_string(),
+        Some(w) => format!(
+            "{} {} iteration{} (KL {:.4}, position {:.1e} of the diagonal)",
+            if w.converged {
+                "converged after"
+            } else {
+                "**no**: stopped at its cap of"
+            },
+            thousands(usize::try_from(w.iterations).unwrap_or(usize::MAX)),
+            if w.iterations == 1 { "" } else { "s" },
+            w.kl,
+            w.position_relative
+        ),
+    }
 }
 
 /// A worst-vertex check as a table cell; a failure also says by how much the row's worst vertex
@@ -223,11 +246,17 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
     let _ = writeln!(md, "\n## Checks\n");
     let _ = writeln!(
         md,
+        "*SkinNet's warm start*: how the regression of bone heat before the image losses ended, \
+         with its KL and posed-position error averaged over its last iterations (converged: both \
+         within the configuration's tolerances).\n"
+    );
+    let _ = writeln!(
+        md,
         "| character | ours < static < initial (Chamfer) | ours' vertex furthest off the true \
          surface ≤ bone heat's, every frame | ours' worst vertex, vertex to vertex, ≤ bone heat's, \
-         every frame | error |"
+         every frame | SkinNet's warm start | error |"
     );
-    let _ = writeln!(md, "| --- | --- | --- | --- | --- |");
+    let _ = writeln!(md, "| --- | --- | --- | --- | --- | --- |");
     for r in results {
         let ordering = match r.ordering_holds {
             None => "–",
@@ -236,10 +265,11 @@ pub fn zoo_markdown(command: &str, budget: &Budget, results: &[ZooResult], total
         };
         let _ = writeln!(
             md,
-            "| {} | {ordering} | {} | {} | {} |",
+            "| {} | {ordering} | {} | {} | {} | {} |",
             r.name,
             check_cell(r.off_surface_ours.as_ref(), r.size),
             check_cell(r.worst_vertex_ours.as_ref(), r.size),
+            warm_start_cell(r.warm_start.as_ref()),
             r.error.as_deref().unwrap_or("")
         );
     }
@@ -315,6 +345,30 @@ mod tests {
     }
 
     #[test]
+    fn a_warm_start_cell_says_whether_it_converged() {
+        let mut w = WarmStatus {
+            iterations: 2069,
+            converged: true,
+            kl: 0.00814,
+            position_relative: 9.93e-4,
+        };
+        assert_eq!(
+            warm_start_cell(Some(&w)),
+            "converged after 2,069 iterations (KL 0.0081, position 9.9e-4 of the diagonal)"
+        );
+        w.converged = false;
+        w.iterations = 3000;
+        assert_eq!(
+            warm_start_cell(Some(&w)),
+            "**no**: stopped at its cap of 3,000 iterations (KL 0.0081, position 9.9e-4 of the \
+             diagonal)"
+        );
+        w.iterations = 0;
+        assert_eq!(warm_start_cell(Some(&w)), "–");
+        assert_eq!(warm_start_cell(None), "–");
+    }
+
+    #[test]
     fn the_summary_counts_each_check_separately() {
         let check = |failures: Vec<(usize, f64, f64)>| {
             Some(CheckSummary {
@@ -333,6 +387,7 @@ mod tests {
             test: "b".into(),
             frames: (4, 4),
             rows: Vec::new(),
+            warm_start: None,
             ordering_holds: Some(ordering),
             off_surface_ours: check(if off { vec![] } else { vec![(1, 2.0, 1.0)] }),
             off_surface_static: None,
