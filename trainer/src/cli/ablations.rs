@@ -30,7 +30,7 @@ use skinfield_trainer::train::data::{DataOptions, TrainData, train_data};
 use skinfield_trainer::train::stages::{ColourSource, StageConfig, load_images};
 use skinfield_trainer::train::{LossWeights, TrainConfig, Trainer};
 
-use super::train::{full_template_data, train_static};
+use super::train::{full_template_data, train_static, trains_every_vertex};
 
 /// The row every other is compared with: all four stages, every camera.
 pub const FULL_METHOD: &str = "ours";
@@ -167,7 +167,7 @@ pub fn run(
         // Stages 2–4 on the full template: built once (unless stage 1 already trains on it),
         // every variant resumes stage 1 onto it.
         let stage_data = (full.full_resolution
-            && data.template.vertex_count() != capture.template.vertex_count())
+            && !trains_every_vertex(data.template.vertex_count(), capture))
         .then(|| full_template_data(capture, initial, &options))
         .transpose()?;
         let stage_data = stage_data.as_ref().unwrap_or(&data);

@@ -204,7 +204,7 @@ pub fn for_stages(
 ) -> anyhow::Result<Trainer> {
     let stages = trainer.config().stages;
     if !(stages.any() && stages.full_resolution)
-        || trainer.training_vertex_count() == capture.template.vertex_count()
+        || trains_every_vertex(trainer.training_vertex_count(), capture)
     {
         return Ok(trainer);
     }
@@ -212,6 +212,14 @@ pub fn for_stages(
     trainer
         .with_data(data)
         .context("moving SkinNet to the full-resolution template for stages 2–4")
+}
+
+/// Whether a SkinNet trained on `training_vertices` vertices already trains on every vertex of
+/// the capture's template (the training template was not simplified), so stages 2–4 need no
+/// full-resolution data of their own.
+#[must_use]
+pub fn trains_every_vertex(training_vertices: usize, capture: &Capture) -> bool {
+    training_vertices == capture.template.vertex_count()
 }
 
 /// The training data of `options` rebuilt on the capture's full-resolution template (every
