@@ -143,10 +143,7 @@ const BOUND: &str = "bound-pose";
 /// The training configuration every seed starts from: `--config` (or the trainer's defaults)
 /// with the demo's flags applied; the seed is set per run.
 fn base_config(args: &Args) -> anyhow::Result<TrainConfig> {
-    let file = match &args.config {
-        Some(path) => TrainConfig::load(path)?,
-        None => TrainConfig::default(),
-    };
+    let file = TrainConfig::load_or_default(args.config.as_deref())?;
     let config = TrainConfig {
         iterations: args.iterations,
         warm_start_iterations: args.warm_start.unwrap_or(file.warm_start_iterations),

@@ -60,10 +60,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let capture = load_capture(&args.capture)
         .with_context(|| format!("loading the capture {}", args.capture.display()))?;
-    let mut config = match &args.config {
-        Some(path) => TrainConfig::load(path)?,
-        None => TrainConfig::default(),
-    };
+    let mut config = TrainConfig::load_or_default(args.config.as_deref())?;
     if args.allow_worse {
         config.refuse_worse_than_initial = false;
     }

@@ -373,6 +373,12 @@ impl TrainConfig {
         Ok(c)
     }
 
+    /// [`TrainConfig::load`] of `path` when one is given, otherwise the defaults: what `trainer
+    /// train` and `trainer demo` start from.
+    pub fn load_or_default(path: Option<&Path>) -> Result<Self, ConfigError> {
+        path.map_or_else(|| Ok(Self::default()), Self::load)
+    }
+
     /// Checks ranges; returns the first bad field.
     pub fn validate(&self) -> Result<(), &'static str> {
         if self.batch == 0 || self.batch > 64 {
@@ -489,6 +495,20 @@ mod tests {
         assert!(e.contains("bogus") && e.contains("c.json"), "{e}");
         std::fs::write(&p, r#"{"iterations": 5}"#).unwrap();
         assert_eq!(TrainConfig::load(&p).unwrap().iterations, 5);
+        // No file: the defaults; a file: what `load` reads, errors included.
+        assert_eq!(
+            TrainConfig::load_or_default(None).unwrap(),
+            TrainConfig::default()
+        );
+        assert_eq!(
+            TrainConfig::load_or_default(Some(&p)).unwrap().iterations,
+            5
+        );
+        std::fs::write(&p, r#"{"batch": 0}"#).unwrap();
+        assert!(matches!(
+            TrainConfig::load_or_default(Some(&p)),
+            Err(ConfigError::Field { field: "batch", .. })
+        ));
     }
 
     #[test]
