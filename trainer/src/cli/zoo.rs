@@ -303,7 +303,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let json: serde_json::Value = serde_json::from_str(&text)
                 .with_context(|| format!("{}: not JSON", path.display()))?;
             (
-                TrainConfig::load(path)?,
+                TrainConfig::parse(&text, path)?,
                 Some((path.display().to_string(), json)),
             )
         }

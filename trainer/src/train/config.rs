@@ -362,7 +362,13 @@ impl TrainConfig {
             path: path.to_owned(),
             cause,
         })?;
-        let c: Self = serde_json::from_str(&text).map_err(|cause| ConfigError::Parse {
+        Self::parse(&text, path)
+    }
+
+    /// A configuration from the JSON text of the file `path` (named in the errors), checked
+    /// as [`TrainConfig::load`] checks it: for a caller that also keeps the text.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let c: Self = serde_json::from_str(text).map_err(|cause| ConfigError::Parse {
             path: path.to_owned(),
             cause,
         })?;
@@ -508,6 +514,21 @@ mod tests {
         assert!(matches!(
             TrainConfig::load_or_default(Some(&p)),
             Err(ConfigError::Field { field: "batch", .. })
+        ));
+        // Text already read: what `load` makes of the same file, the path named in errors.
+        let named = Path::new("named.json");
+        assert_eq!(
+            TrainConfig::parse(r#"{"iterations": 7}"#, named)
+                .unwrap()
+                .iterations,
+            7
+        );
+        let e = TrainConfig::parse(r#"{"batch": 0}"#, named).unwrap_err();
+        assert!(matches!(&e, ConfigError::Field { field: "batch", .. }));
+        assert!(e.to_string().contains("named.json"), "{e}");
+        assert!(matches!(
+            TrainConfig::parse("{", named),
+            Err(ConfigError::Parse { .. })
         ));
     }
 
