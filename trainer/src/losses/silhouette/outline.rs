@@ -110,11 +110,10 @@ impl Outline {
             width,
             height,
             segments,
-            nearest: vec![NONE; expected],
+            nearest: Vec::new(),
             links,
         };
-        outline.seed();
-        outline.sweep();
+        outline.record_nearest();
         Ok(outline)
     }
 
@@ -124,75 +123,45 @@ impl Outline {
         Self::from_coverage(width, height, &coverage)
     }
 
-    fn centre(&self, i: usize) -> Vec2 {
-        Vec2::new((i % self.width) as f32 + 0.5, (i / self.width) as f32 + 0.5)
+    /// Records every pixel centre's nearest segment: each segment seeds the centres around its
+    /// midpoint, then raster sweeps pass candidates on ([`NearestField`]).
+    fn record_nearest(&mut self) {
+        self.nearest = self.sweep_nearest::<true>();
     }
 
-    fn offer(&mut self, i: usize, s: u32) {
-        let c = self.centre(i);
-        let cur = self.nearest[i];
-        let d = |k: u32| {
-            let seg = self.segments[k as usize];
-            (closest_on_segment(seg, c).0 - c).length_squared()
+    /// Each pixel centre's nearest segment (an index into [`Outline::segments`]), row-major.
+    #[must_use]
+    pub fn nearest_segments(&self) -> &[u32] {
+        &self.nearest
+    }
+
+    /// The nearest-segment field built again by the plain sweep, in which every offer measures
+    /// both the offered and the held segment and every neighbour is offered: the reference that
+    /// the cached sweep of [`Outline::from_coverage`] is tested (equal, bit for bit) and
+    /// benchmarked against.
+    #[must_use]
+    pub fn plain_nearest_segments(&self) -> Vec<u32> {
+        self.sweep_nearest::<false>()
+    }
+
+    /// The nearest-segment field built again by the cached sweep (what
+    /// [`Outline::from_coverage`] records), for the bench.
+    #[must_use]
+    pub fn cached_nearest_segments(&self) -> Vec<u32> {
+        self.sweep_nearest::<true>()
+    }
+
+    fn sweep_nearest<const CACHED: bool>(&self) -> Vec<u32> {
+        let mut field = NearestField::<CACHED> {
+            width: self.width,
+            height: self.height,
+            segments: &self.segments,
+            nearest: vec![NONE; self.width * self.height],
+            best: vec![f32::INFINITY; self.width * self.height],
         };
-        if cur == NONE || d(s) < d(cur) {
-            self.nearest[i] = s;
-        }
-    }
-
-    /// Every segment is offered to the (up to four) pixel centres at the corners of its cell.
-    fn seed(&mut self) {
-        for s in 0..self.segments.len() {
-            let mid = (self.segments[s][0] + self.segments[s][1]) * 0.5;
-            // The cell's top-left centre is at (cx + 0.5, cy + 0.5).
-            let cx = (mid.x - 0.5).floor() as i64;
-            let cy = (mid.y - 0.5).floor() as i64;
-            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                let (x, y) = (cx + dx, cy + dy);
-                if x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height {
-                    self.offer(y as usize * self.width + x as usize, s as u32);
-                }
-            }
-        }
-    }
-
-    /// Two raster sweeps (down, then up), each passing every pixel's candidate to the
-    /// neighbours not yet visited; run twice, which propagates around any concavity of a
-    /// silhouette at this scale.
-    fn sweep(&mut self) {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let at = |x: i64, y: i64| (y * w + x) as usize;
-        let pull = |o: &mut Self, x: i64, y: i64, dx: i64, dy: i64| {
-            let (nx, ny) = (x + dx, y + dy);
-            if nx >= 0 && ny >= 0 && nx < w && ny < h {
-                let s = o.nearest[at(nx, ny)];
-                if s != NONE {
-                    o.offer(at(x, y), s);
-                }
-            }
-        };
-        for _ in 0..2 {
-            for y in 0..h {
-                for x in 0..w {
-                    for (dx, dy) in [(-1, 0), (-1, -1), (0, -1), (1, -1)] {
-                        pull(self, x, y, dx, dy);
-                    }
-                }
-                for x in (0..w).rev() {
-                    pull(self, x, y, 1, 0);
-                }
-            }
-            for y in (0..h).rev() {
-                for x in (0..w).rev() {
-                    for (dx, dy) in [(1, 0), (1, 1), (0, 1), (-1, 1)] {
-                        pull(self, x, y, dx, dy);
-                    }
-                }
-                for x in 0..w {
-                    pull(self, x, y, -1, 0);
-                }
-            }
-        }
+        field.seed();
+        field.sweep();
+        field.nearest
     }
 
     /// The distance from image point `p` (pixels) to the outline, and the unit vector from the
@@ -260,6 +229,127 @@ impl Outline {
 
 /// For each segment, the other segment sharing each of its ends. Marching squares computes a
 /// crossing on a cell edge identically from both cells, so shared ends are bit-identical.
+/// The nearest-segment field while it is built: each pixel centre's best segment so far and
+/// its squared distance. Keeping the distance (rather than recomputing the held segment's at
+/// every offer) and skipping a neighbour that holds the same segment (most of a sweep's offers:
+/// whole regions share their nearest segment) leave the same comparisons on the same values,
+/// so the field is the one a plain offer-everything sweep builds, bit for bit
+/// (`the_cached_sweep_records_what_the_plain_one_does`), at a fraction of the work: this
+/// construction was three quarters of `trainer train`'s start-up, 960 masks of 256² on the
+/// built-in capture.
+///
+/// `CACHED = false` is that plain sweep, kept as the reference
+/// ([`Outline::plain_nearest_segments`]).
+struct NearestField<'a, const CACHED: bool> {
+    width: usize,
+    height: usize,
+    segments: &'a [[Vec2; 2]],
+    nearest: Vec<u32>,
+    /// The squared distance from each centre to its held segment (cached sweep only).
+    best: Vec<f32>,
+}
+
+impl<const CACHED: bool> NearestField<'_, CACHED> {
+    fn centre(&self, i: usize) -> Vec2 {
+        Vec2::new((i % self.width) as f32 + 0.5, (i / self.width) as f32 + 0.5)
+    }
+
+    fn squared_distance(&self, s: u32, c: Vec2) -> f32 {
+        (closest_on_segment(self.segments[s as usize], c).0 - c).length_squared()
+    }
+
+    fn offer(&mut self, i: usize, s: u32) {
+        let cur = self.nearest[i];
+        if CACHED {
+            if cur == s {
+                return;
+            }
+            let d = self.squared_distance(s, self.centre(i));
+            if cur == NONE || d < self.best[i] {
+                self.nearest[i] = s;
+                self.best[i] = d;
+            }
+        } else {
+            let c = self.centre(i);
+            if cur == NONE || self.squared_distance(s, c) < self.squared_distance(cur, c) {
+                self.nearest[i] = s;
+            }
+        }
+    }
+
+    /// Every segment is offered to the (up to four) pixel centres at the corners of its cell.
+    fn seed(&mut self) {
+        for s in 0..self.segments.len() {
+            let mid = (self.segments[s][0] + self.segments[s][1]) * 0.5;
+            // The cell's top-left centre is at (cx + 0.5, cy + 0.5).
+            let cx = (mid.x - 0.5).floor() as i64;
+            let cy = (mid.y - 0.5).floor() as i64;
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (x, y) = (cx + dx, cy + dy);
+                if x >= 0 && y >= 0 && (x as usize) < self.width && (y as usize) < self.height {
+                    self.offer(y as usize * self.width + x as usize, s as u32);
+                }
+            }
+        }
+    }
+
+    /// Two raster sweeps (down, then up), each passing every pixel's candidate to the
+    /// neighbours not yet visited; run twice, which propagates around any concavity of a
+    /// silhouette at this scale.
+    fn sweep(&mut self) {
+        let (w, h) = (self.width, self.height);
+        // Offers neighbour `j`'s segment to pixel `i`; the callers keep `j` on the image.
+        let pull = |o: &mut Self, i: usize, j: usize| {
+            let s = o.nearest[j];
+            if s != NONE {
+                o.offer(i, s);
+            }
+        };
+        for _ in 0..2 {
+            for y in 0..h {
+                for x in 0..w {
+                    let i = y * w + x;
+                    if x > 0 {
+                        pull(self, i, i - 1);
+                    }
+                    if y > 0 {
+                        if x > 0 {
+                            pull(self, i, i - w - 1);
+                        }
+                        pull(self, i, i - w);
+                        if x + 1 < w {
+                            pull(self, i, i - w + 1);
+                        }
+                    }
+                }
+                for x in (0..w - 1).rev() {
+                    pull(self, y * w + x, y * w + x + 1);
+                }
+            }
+            for y in (0..h).rev() {
+                for x in (0..w).rev() {
+                    let i = y * w + x;
+                    if x + 1 < w {
+                        pull(self, i, i + 1);
+                    }
+                    if y + 1 < h {
+                        if x + 1 < w {
+                            pull(self, i, i + w + 1);
+                        }
+                        pull(self, i, i + w);
+                        if x > 0 {
+                            pull(self, i, i + w - 1);
+                        }
+                    }
+                }
+                for x in 1..w {
+                    pull(self, y * w + x, y * w + x - 1);
+                }
+            }
+        }
+    }
+}
+
 fn link(segments: &[[Vec2; 2]]) -> Vec<[u32; 2]> {
     let key = |p: Vec2| (p.x.to_bits(), p.y.to_bits());
     let mut ends: Vec<((u32, u32), u32, usize)> = segments
@@ -439,6 +529,32 @@ mod tests {
         let mean_b = errs.iter().sum::<f32>() / errs.len() as f32;
         assert!(mean_b.abs() < 0.15, "binary mean radial error {mean_b} px");
         assert!(errs.iter().all(|e| e.abs() < 0.75));
+    }
+
+    #[test]
+    fn the_cached_sweep_records_what_the_plain_one_does() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut masks = vec![
+            (48, 40, disc(48, 40, Vec2::new(20.2, 19.7), 11.3, 4)),
+            (33, 57, disc(33, 57, Vec2::new(3.0, 50.0), 20.0, 1)),
+        ];
+        // Random blobs: many components, holes and concavities.
+        let noise: Vec<f32> = (0..64 * 48)
+            .map(|_| {
+                if rng.random_bool(0.45) {
+                    1.0
+                } else {
+                    rng.random_range(0.0..1.0)
+                }
+            })
+            .collect();
+        masks.push((64, 48, noise));
+        for (w, h, cov) in masks {
+            let o = Outline::from_coverage(w, h, &cov).unwrap();
+            assert!(o.nearest.iter().all(|&s| s != NONE));
+            assert_eq!(o.nearest, o.plain_nearest_segments(), "{w}×{h}");
+            assert_eq!(o.nearest, o.cached_nearest_segments());
+        }
     }
 
     #[test]
