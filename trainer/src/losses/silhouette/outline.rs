@@ -157,7 +157,11 @@ impl Outline {
             height: self.height,
             segments: &self.segments,
             nearest: vec![NONE; self.width * self.height],
-            best: vec![f32::INFINITY; self.width * self.height],
+            best: if CACHED {
+                vec![f32::INFINITY; self.width * self.height]
+            } else {
+                Vec::new()
+            },
         };
         field.seed();
         field.sweep();
@@ -227,8 +231,6 @@ impl Outline {
     }
 }
 
-/// For each segment, the other segment sharing each of its ends. Marching squares computes a
-/// crossing on a cell edge identically from both cells, so shared ends are bit-identical.
 /// The nearest-segment field while it is built: each pixel centre's best segment so far and
 /// its squared distance. Keeping the distance (rather than recomputing the held segment's at
 /// every offer) and skipping a neighbour that holds the same segment (most of a sweep's offers:
@@ -350,6 +352,8 @@ impl<const CACHED: bool> NearestField<'_, CACHED> {
     }
 }
 
+/// For each segment, the other segment sharing each of its ends. Marching squares computes a
+/// crossing on a cell edge identically from both cells, so shared ends are bit-identical.
 fn link(segments: &[[Vec2; 2]]) -> Vec<[u32; 2]> {
     let key = |p: Vec2| (p.x.to_bits(), p.y.to_bits());
     let mut ends: Vec<((u32, u32), u32, usize)> = segments
