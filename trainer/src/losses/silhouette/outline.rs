@@ -113,7 +113,7 @@ impl Outline {
             nearest: Vec::new(),
             links,
         };
-        outline.record_nearest();
+        outline.nearest = outline.cached_nearest_segments();
         Ok(outline)
     }
 
@@ -121,18 +121,6 @@ impl Outline {
     pub fn from_mask(width: usize, height: usize, mask: &[bool]) -> Result<Self, OutlineError> {
         let coverage: Vec<f32> = mask.iter().map(|&m| if m { 1.0 } else { 0.0 }).collect();
         Self::from_coverage(width, height, &coverage)
-    }
-
-    /// Records every pixel centre's nearest segment: each segment seeds the centres around its
-    /// midpoint, then raster sweeps pass candidates on ([`NearestField`]).
-    fn record_nearest(&mut self) {
-        self.nearest = self.sweep_nearest::<true>();
-    }
-
-    /// Each pixel centre's nearest segment (an index into [`Outline::segments`]), row-major.
-    #[must_use]
-    pub fn nearest_segments(&self) -> &[u32] {
-        &self.nearest
     }
 
     /// The nearest-segment field built again by the plain sweep, in which every offer measures
@@ -144,8 +132,9 @@ impl Outline {
         self.sweep_nearest::<false>()
     }
 
-    /// The nearest-segment field built again by the cached sweep (what
-    /// [`Outline::from_coverage`] records), for the bench.
+    /// Each pixel centre's nearest segment, row-major, by the cached sweep: every segment seeds
+    /// the centres around its midpoint, then raster sweeps pass candidates on. What
+    /// [`Outline::from_coverage`] records; public for the bench.
     #[must_use]
     pub fn cached_nearest_segments(&self) -> Vec<u32> {
         self.sweep_nearest::<true>()
@@ -557,7 +546,6 @@ mod tests {
             let o = Outline::from_coverage(w, h, &cov).unwrap();
             assert!(o.nearest.iter().all(|&s| s != NONE));
             assert_eq!(o.nearest, o.plain_nearest_segments(), "{w}×{h}");
-            assert_eq!(o.nearest, o.cached_nearest_segments());
         }
     }
 
