@@ -124,14 +124,16 @@ impl<'a> TriangleGrid<'a> {
             ((hi.x - lo.x) / cell) as i64 + 1,
             ((hi.y - lo.y) / cell) as i64 + 1,
         ];
+        // Offsets from the minimum are ≥ 0, so truncating is flooring (and cheaper: `floor`
+        // is a call into libm, and this runs for every triangle of every view).
         let range = |t: &[u32; 3]| {
             let (mut a, mut b) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
             for &i in t {
                 a = a.min(uv[i as usize]);
                 b = b.max(uv[i as usize]);
             }
-            let a = ((a - lo) / cell).floor();
-            let b = ((b - lo) / cell).floor();
+            let a = (a - lo) / cell;
+            let b = (b - lo) / cell;
             (a.x as i64, a.y as i64, b.x as i64, b.y as i64)
         };
         let (start, items) = super::cell_lists(&triangles, dims, range);
@@ -148,9 +150,13 @@ impl<'a> TriangleGrid<'a> {
 
     /// Whether `p` is strictly inside some projected triangle (either winding).
     fn covers(&self, p: Vec2) -> bool {
-        let c = ((p - self.origin) / self.cell).floor();
+        let c = (p - self.origin) / self.cell;
+        // Left of or above the grid (truncation below would round -0.5 up to cell 0).
+        if c.x < 0.0 || c.y < 0.0 {
+            return false;
+        }
         let (x, y) = (c.x as i64, c.y as i64);
-        if x < 0 || y < 0 || x >= self.dims[0] || y >= self.dims[1] {
+        if x >= self.dims[0] || y >= self.dims[1] {
             return false;
         }
         let cell = (y * self.dims[0] + x) as usize;

@@ -122,14 +122,22 @@ fn cell_lists<T>(
     range: impl Fn(&T) -> (i64, i64, i64, i64),
 ) -> (Vec<usize>, Vec<u32>) {
     let ncell = (dims[0] * dims[1]) as usize;
-    let cells = |t: &T| {
-        let (x0, y0, x1, y1) = range(t);
-        (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| (y * dims[0] + x) as usize))
-    };
+    // Each item's range is computed once and kept for the second pass: computing it is most
+    // of the work (a grid is built per view and iteration for every triangle of the mesh).
+    let ranges: Vec<[u32; 4]> = all
+        .iter()
+        .map(|t| {
+            let (x0, y0, x1, y1) = range(t);
+            [x0 as u32, y0 as u32, x1 as u32, y1 as u32]
+        })
+        .collect();
+    let width = dims[0] as usize;
     let mut start = vec![0usize; ncell + 1];
-    for t in all {
-        for c in cells(t) {
-            start[c + 1] += 1;
+    for &[x0, y0, x1, y1] in &ranges {
+        for y in y0 as usize..=y1 as usize {
+            for c in y * width + x0 as usize..=y * width + x1 as usize {
+                start[c + 1] += 1;
+            }
         }
     }
     for c in 0..ncell {
@@ -137,10 +145,12 @@ fn cell_lists<T>(
     }
     let mut fill = start.clone();
     let mut items = vec![0u32; start[ncell]];
-    for (i, t) in all.iter().enumerate() {
-        for c in cells(t) {
-            items[fill[c]] = i as u32;
-            fill[c] += 1;
+    for (i, &[x0, y0, x1, y1]) in ranges.iter().enumerate() {
+        for y in y0 as usize..=y1 as usize {
+            for c in y * width + x0 as usize..=y * width + x1 as usize {
+                items[fill[c]] = i as u32;
+                fill[c] += 1;
+            }
         }
     }
     (start, items)
@@ -173,9 +183,11 @@ impl SegmentGrid {
             ((hi.x - lo.x) / cell) as i64 + 1,
             ((hi.y - lo.y) / cell) as i64 + 1,
         ];
+        // Offsets from the minimum are ≥ 0, so truncating is flooring (and cheaper: `floor`
+        // is a call into libm).
         let range = |s: &[Vec2; 2]| {
-            let a = ((s[0].min(s[1]) - lo) / cell).floor();
-            let b = ((s[0].max(s[1]) - lo) / cell).floor();
+            let a = (s[0].min(s[1]) - lo) / cell;
+            let b = (s[0].max(s[1]) - lo) / cell;
             (a.x as i64, a.y as i64, b.x as i64, b.y as i64)
         };
         let (start, items) = cell_lists(segments, dims, range);

@@ -308,3 +308,36 @@ fn huber_is_quadratic_then_linear_and_continuous() {
 fn empty_mask_is_an_error() {
     assert!(SilhouetteTarget::from_mask(4, 4, &[false; 16]).is_err());
 }
+
+#[test]
+fn cell_lists_equal_brute_force() {
+    // Random inclusive cell ranges on a 7 × 5 grid, one-cell and whole-grid ranges included.
+    let dims = [7i64, 5];
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut ranges: Vec<(i64, i64, i64, i64)> = (0..60)
+        .map(|_| {
+            let (xa, xb) = (rng.random_range(0..7), rng.random_range(0..7));
+            let (ya, yb) = (rng.random_range(0..5), rng.random_range(0..5));
+            (xa.min(xb), ya.min(yb), xa.max(xb), ya.max(yb))
+        })
+        .collect();
+    ranges.extend([(3, 2, 3, 2), (0, 0, 6, 4), (6, 4, 6, 4)]);
+    let (start, items) = cell_lists(&ranges, dims, |r| *r);
+    assert_eq!(start.len(), 36);
+    for y in 0..5 {
+        for x in 0..7 {
+            let c = (y * 7 + x) as usize;
+            let expected: Vec<u32> = (0..ranges.len() as u32)
+                .filter(|&i| {
+                    let (x0, y0, x1, y1) = ranges[i as usize];
+                    (x0..=x1).contains(&x) && (y0..=y1).contains(&y)
+                })
+                .collect();
+            assert_eq!(
+                &items[start[c]..start[c + 1]],
+                &expected[..],
+                "cell ({x}, {y})"
+            );
+        }
+    }
+}
