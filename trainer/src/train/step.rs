@@ -141,15 +141,14 @@ impl Trainer {
         // Relative to the character's size (`LossWeights::laplacian`).
         let lap =
             (self.laplacian.loss(&lap_input)? / (b as f64 * v * self.diagonal * self.diagonal))?;
-        let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
-        let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
         let lw = self.config.weights;
-        // Logged at any weight; kept out of the backward pass when it has none.
-        let prior_input = if lw.prior > 0.0 {
-            w.clone()
-        } else {
-            w.detach()
-        };
+        // The optional regularisers are logged at any weight, and kept out of the backward pass
+        // when they have none (a weight of 0 would still send the backward through them).
+        let weighted = |weight: f64| if weight > 0.0 { w.clone() } else { w.detach() };
+        let skin = (self.skinning.loss(&weighted(lw.skinning))? / (b as f64 * v))?;
+        let part = (self.partwise.loss(&weighted(lw.partwise))?
+            / (b * self.partwise.count().max(1)) as f64)?;
+        let prior_input = weighted(lw.prior);
         let (prior, init_entropy) =
             self.prior_cross_entropy(&prior_input, &init, query.as_ref())?;
         let terms = [
