@@ -121,8 +121,10 @@ pub fn default_work_dir(out: &Path) -> PathBuf {
 /// What [`train_skinnet`] reports about a finished run.
 #[derive(Clone, Copy, Debug)]
 pub struct SkinNetRun {
-    /// Seconds spent in the optimisation loops.
+    /// Seconds spent in the optimisation loops, all stages.
     pub seconds: f64,
+    /// Of which stages 2–4 (after stage 1's warm start and image iterations).
+    pub stage_seconds: f64,
     /// How the warm start ended (with an ensemble, the distillation of the members' mean).
     pub warm_start: WarmStatus,
 }
@@ -156,6 +158,7 @@ pub fn train_skinnet(
     let warm_start = trainer.warm_status();
     // The average of stage 1's iterates is the model; stages 2–4 continue from it.
     trainer.adopt_average()?;
+    let stages_start = Instant::now();
     let mut trainer = for_stages(trainer, capture, initial, options)?;
     let stages = trainer.config().stages;
     let appearance = if stages.any() {
@@ -175,6 +178,11 @@ pub fn train_skinnet(
     // Stage 4's average, when it ran.
     trainer.adopt_average()?;
     let seconds = start.elapsed().as_secs_f64();
+    let stage_seconds = if stages.any() {
+        stages_start.elapsed().as_secs_f64()
+    } else {
+        0.0
+    };
     write_refined_motion(capture, &trainer, work)?;
     plot_logs(work, "SkinNet")?;
     check_validation(&trainer)?;
@@ -186,6 +194,7 @@ pub fn train_skinnet(
     model.write(out)?;
     Ok(SkinNetRun {
         seconds,
+        stage_seconds,
         warm_start,
     })
 }
