@@ -41,32 +41,34 @@ pub const STAGE1_METHOD: &str = "stage 1 only";
 /// Options of `trainer demo --ablations`.
 #[derive(ClapArgs, Debug, Clone)]
 pub struct AblationArgs {
-    /// Produce the ablation table (paper Table 2) instead of the plain demo.
+    /// Produce the ablation table (paper Table 2) instead of the plain demo. The options below
+    /// shape its rows and are refused without it (the plain demo trains on the configuration's
+    /// stages).
     #[arg(long)]
     pub ablations: bool,
     /// Stage 2 (AlbedoNet) iterations.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, requires = "ablations", default_value_t = 100)]
     pub albedo_iterations: u64,
     /// Stage 3 (ShadowNet) iterations.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, requires = "ablations", default_value_t = 100)]
     pub shadow_iterations: u64,
     /// Stage 4 (SkinNet refined with the rendering loss) iterations.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, requires = "ablations", default_value_t = 100)]
     pub refine_iterations: u64,
     /// Visible pixels sampled per view and iteration.
-    #[arg(long, default_value_t = StageConfig::default().pixels_per_view)]
+    #[arg(long, requires = "ablations", default_value_t = StageConfig::default().pixels_per_view)]
     pub pixels_per_view: usize,
     /// Views rendered per frame and iteration in the rendering loss (0 = all).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, requires = "ablations", default_value_t = 4)]
     pub views_per_frame: usize,
     /// Weight of the rendering loss in stage 4.
-    #[arg(long, default_value_t = StageConfig::default().rendering_weight)]
+    #[arg(long, requires = "ablations", default_value_t = StageConfig::default().rendering_weight)]
     pub rendering_weight: f64,
     /// Gaussian blur (pixels) of the target images inside their masks.
-    #[arg(long, default_value_t = StageConfig::default().image_blur_px)]
+    #[arg(long, requires = "ablations", default_value_t = StageConfig::default().image_blur_px)]
     pub image_blur_px: f64,
     /// Cameras of the "fewer cameras" row.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, requires = "ablations", default_value_t = 4)]
     pub ablation_cameras: usize,
 }
 

@@ -496,6 +496,29 @@ mod tests {
     }
 
     #[test]
+    fn the_ablation_options_are_refused_without_ablations() {
+        let parse = |extra: &[&str]| {
+            Args::try_parse_from(std::iter::once("demo").chain(extra.iter().copied()))
+        };
+        for flag in [
+            "--albedo-iterations",
+            "--shadow-iterations",
+            "--refine-iterations",
+            "--pixels-per-view",
+            "--views-per-frame",
+            "--rendering-weight",
+            "--image-blur-px",
+            "--ablation-cameras",
+        ] {
+            let err = parse(&[flag, "3"]).map(|_| ()).expect_err(flag);
+            assert!(err.to_string().contains("--ablations"), "{flag}: {err}");
+            let ok = parse(&["--ablations", flag, "3"]).expect(flag);
+            assert!(ok.ablation.ablations);
+        }
+        assert!(!args(&[]).ablation.ablations);
+    }
+
+    #[test]
     fn without_a_file_the_demo_trains_on_the_trainers_defaults_at_its_own_budget() {
         let config = base_config(&args(&[])).unwrap();
         assert_eq!(
