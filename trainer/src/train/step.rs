@@ -141,25 +141,27 @@ impl Trainer {
         // Relative to the character's size (`LossWeights::laplacian`).
         let lap =
             (self.laplacian.loss(&lap_input)? / (b as f64 * v * self.diagonal * self.diagonal))?;
+        let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
+        let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
+        let (prior, init_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref())?;
         let lw = self.config.weights;
-        // The optional regularisers are logged at any weight, and kept out of the backward pass
-        // when they have none (a weight of 0 would still send the backward through them).
-        let weighted = |weight: f64| if weight > 0.0 { w.clone() } else { w.detach() };
-        let skin = (self.skinning.loss(&weighted(lw.skinning))? / (b as f64 * v))?;
-        let part = (self.partwise.loss(&weighted(lw.partwise))?
-            / (b * self.partwise.count().max(1)) as f64)?;
-        let prior_input = weighted(lw.prior);
-        let (prior, init_entropy) =
-            self.prior_cross_entropy(&prior_input, &init, query.as_ref())?;
-        let terms = [
-            (&sb * lw.silhouette_boundary)?,
-            (&sc * lw.silhouette_contour)?,
-            (&lap * lw.laplacian)?,
-            (&skin * lw.skinning)?,
-            (&part * lw.partwise)?,
-            (&prior * lw.prior)?,
+        let weighted = [
+            (&sb, lw.silhouette_boundary),
+            (&sc, lw.silhouette_contour),
+            (&lap, lw.laplacian),
+            (&skin, lw.skinning),
+            (&part, lw.partwise),
+            (&prior, lw.prior),
         ];
-        let mut terms = terms.to_vec();
+        // Every term is logged; one of weight 0 stays out of the total, so the backward pass
+        // does not run through it (multiplied by 0 it would, for nothing). Only when every
+        // weight is 0 do they all enter, as zeros, so the step still has its gradients.
+        let any = weighted.iter().any(|&(_, k)| k != 0.0);
+        let mut terms = weighted
+            .iter()
+            .filter(|&&(_, k)| !any || k != 0.0)
+            .map(|&(t, k)| t * k)
+            .collect::<candle_core::Result<Vec<_>>>()?;
         if let Some(r) = &self.pose_refinement {
             terms.push(r.prior(&frames)?);
         }
