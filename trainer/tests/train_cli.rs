@@ -41,6 +41,20 @@ fn an_ensemble_trains_its_members_then_distils_one_model() {
     // The student's stage 1 is the distillation alone.
     let distil = std::fs::read_to_string(work.join("warm_start.csv")).unwrap();
     assert!(distil.lines().count() > 1, "{distil}");
+    // The iterations reported are every member's and the distillation's, one row each in their
+    // logs.
+    let rows =
+        |path: std::path::PathBuf| std::fs::read_to_string(path).unwrap().lines().count() - 1;
+    let warm = rows(work.join("warm_start.csv"))
+        + (0..2)
+            .map(|k| rows(work.join(format!("member-{k}/warm_start.csv"))))
+            .sum::<usize>();
+    assert!(
+        out.contains(&format!(
+            "SkinNet: {warm} warm-start + 12 image iterations before stages 2–4"
+        )),
+        "{out}"
+    );
     let written = std::fs::read(&model).unwrap();
     assert!(skinfield_formats::skf::SkfView::parse(&written).is_ok());
 

@@ -3,7 +3,7 @@
 //! evaluate on the held-out test poses, print the table and write it with plots and pictures.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -245,7 +245,7 @@ fn run_seed(
         "train SkinNet (data + loop + export)",
         t.elapsed().as_secs_f64(),
     ));
-    let (warm_ran, image_ran) = iterations_run(&skin_work, &config);
+    let (warm_ran, image_ran) = (run.warm_iterations, run.image_iterations);
     // Seconds per phase rather than one average: a full-resolution stage-4 iteration costs
     // several times a stage-1 one.
     let stage1_s = run.seconds - run.stage_seconds;
@@ -462,28 +462,6 @@ fn run_seed(
         out.display()
     );
     Ok(rows)
-}
-
-/// The warm-start and image iterations a SkinNet run in `work` went through. The warm start
-/// stops once converged, so its log (one row per iteration) counts it; an ensemble ran each
-/// member's warm start and image iterations in `work/member-K` and its distillation (logged as
-/// a warm start) in `work`.
-fn iterations_run(work: &Path, config: &TrainConfig) -> (u64, u64) {
-    let warm_rows = |dir: &Path| {
-        std::fs::read_to_string(dir.join("warm_start.csv"))
-            .map(|t| t.lines().skip(1).filter(|l| !l.is_empty()).count() as u64)
-            .unwrap_or(config.warm_start_iterations)
-    };
-    if config.ensemble.is_on() {
-        let members = config.ensemble.members;
-        let warm = (0..members)
-            .map(|k| warm_rows(&work.join(format!("member-{k}"))))
-            .sum::<u64>()
-            + warm_rows(work);
-        (warm, members as u64 * config.iterations)
-    } else {
-        (warm_rows(work), config.iterations)
-    }
 }
 
 #[cfg(test)]

@@ -87,7 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             !args.quiet,
         )?
     } else {
-        train_skinnet(
+        let run = train_skinnet(
             &capture,
             &initial,
             config,
@@ -96,8 +96,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &args.out,
             args.resume,
             !args.quiet,
-        )?
-        .seconds
+        )?;
+        println!(
+            "SkinNet: {} warm-start + {} image iterations before stages 2–4",
+            run.warm_iterations, run.image_iterations
+        );
+        run.seconds
     };
     println!(
         "wrote {} ({seconds:.1} s of training; losses in {})",
@@ -127,6 +131,11 @@ pub struct SkinNetRun {
     pub stage_seconds: f64,
     /// How the warm start ended (with an ensemble, the distillation of the members' mean).
     pub warm_start: WarmStatus,
+    /// Warm-start iterations run before stage 1's image iterations, all of them: with an
+    /// ensemble, every member's and the distillation's.
+    pub warm_iterations: u64,
+    /// Stage 1's image iterations (with an ensemble, the members' together).
+    pub image_iterations: u64,
 }
 
 /// Trains SkinNet on the capture's training frames (stages 2–4 too when `config.stages` has
@@ -144,7 +153,7 @@ pub fn train_skinnet(
 ) -> anyhow::Result<SkinNetRun> {
     let data = train_data(capture, initial, options)?;
     let start = Instant::now();
-    let mut trainer = if config.ensemble.is_on() {
+    let (mut trainer, members) = if config.ensemble.is_on() {
         train_ensemble(data, config, work, resume, progress)?
     } else {
         let mut trainer = Trainer::new(data, config, false)?;
@@ -153,9 +162,13 @@ pub fn train_skinnet(
         }
         trainer.run(work, progress)?;
         report_warm_start(&trainer);
-        trainer
+        (trainer, (0, 0))
     };
     let warm_start = trainer.warm_status();
+    let (warm_iterations, image_iterations) = {
+        let (warm, image) = trainer.progress();
+        (members.0 + warm, members.1 + image)
+    };
     // The average of stage 1's iterates is the model; stages 2–4 continue from it.
     trainer.adopt_average()?;
     let stages_start = Instant::now();
@@ -196,6 +209,8 @@ pub fn train_skinnet(
         seconds,
         stage_seconds,
         warm_start,
+        warm_iterations,
+        image_iterations,
     })
 }
 
@@ -244,17 +259,18 @@ pub fn full_template_data(
 
 /// Stage 1 as an ensemble ([`skinfield_trainer::train::ensemble`]): every member trained in
 /// `work/member-K` (seed `seed + K`), then a student in `work` distilled from their mean
-/// weights. Returns the student, ready for stages 2–4 and export; its image iterations are the
-/// members'.
+/// weights. Returns the student, ready for stages 2–4 and export (its image iterations are the
+/// members'), and the warm-start and image iterations the members ran together.
 fn train_ensemble(
     data: TrainData,
     config: TrainConfig,
     work: &Path,
     resume: bool,
     progress: bool,
-) -> anyhow::Result<Trainer> {
+) -> anyhow::Result<(Trainer, (u64, u64))> {
     let members = config.ensemble.members;
     let mut teachers = Vec::with_capacity(members);
+    let mut ran = (0, 0);
     for k in 0..members {
         let member_config = TrainConfig {
             seed: config.seed.wrapping_add(k as u64),
@@ -276,6 +292,8 @@ fn train_ensemble(
         }
         member.run(&dir, progress)?;
         report_warm_start(&member);
+        let (warm, image) = member.progress();
+        ran = (ran.0 + warm, ran.1 + image);
         member.adopt_average()?;
         let report = member.validation_report()?;
         println!("  member {}: validation {}", k + 1, report.model);
@@ -296,7 +314,7 @@ fn train_ensemble(
     println!("distilling the {members} members' mean weights into one SkinNet");
     student.run(work, progress)?;
     report_warm_start(&student);
-    Ok(student)
+    Ok((student, ran))
 }
 
 /// With pose refinement: writes `work/refined_motion.json`, the capture's motion with every

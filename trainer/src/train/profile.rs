@@ -4,6 +4,8 @@
 //!
 //! The timers bracket whole phases of [`super::Trainer::step`] and
 //! [`super::Trainer::warm_step`]; `Instant::now` costs tens of nanoseconds, so they stay on.
+//! The file is written after stage 1 and again after stage 4, with one block of rows per
+//! [`IterationKind`].
 
 use std::time::{Duration, Instant};
 
@@ -54,75 +56,89 @@ impl Phase {
     }
 }
 
-/// Accumulated time per phase, for the warm start and the image-loss iterations separately.
+/// Accumulated time per phase, for each kind of iteration separately.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct StepProfile {
-    warm: [Duration; Phase::ALL.len()],
-    image: [Duration; Phase::ALL.len()],
-    warm_iterations: u64,
-    image_iterations: u64,
+    totals: [[Duration; Phase::ALL.len()]; IterationKind::ALL.len()],
+    iterations: [u64; IterationKind::ALL.len()],
 }
 
-/// Which kind of iteration a timing belongs to.
+/// Which kind of iteration a timing belongs to. The kinds cost very different amounts (stage 4
+/// poses the full-resolution template), so one average over all of them would describe none.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum IterationKind {
     /// A warm-start iteration.
     Warm,
-    /// An image-loss iteration.
+    /// An image-loss iteration of stage 1 (or of the static baseline).
     Image,
+    /// An image-loss iteration of stage 4 (after stage 1's iterations, with or without the
+    /// rendering term).
+    Refine,
+}
+
+impl IterationKind {
+    /// Every kind, in the order of a run.
+    pub const ALL: [IterationKind; 3] = [
+        IterationKind::Warm,
+        IterationKind::Image,
+        IterationKind::Refine,
+    ];
+
+    /// The kind's name in `profile.csv`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            IterationKind::Warm => "warm",
+            IterationKind::Image => "image",
+            IterationKind::Refine => "refine",
+        }
+    }
+
+    fn slot(self) -> usize {
+        self as usize
+    }
+}
+
+impl Phase {
+    fn slot(self) -> usize {
+        self as usize
+    }
 }
 
 impl StepProfile {
     /// Adds `elapsed` to `phase` of `kind`.
     pub fn add(&mut self, kind: IterationKind, phase: Phase, elapsed: Duration) {
-        let slot = Phase::ALL.iter().position(|&p| p == phase).unwrap_or(0);
-        match kind {
-            IterationKind::Warm => self.warm[slot] += elapsed,
-            IterationKind::Image => self.image[slot] += elapsed,
-        }
+        self.totals[kind.slot()][phase.slot()] += elapsed;
     }
 
     /// Counts one finished iteration of `kind`.
     pub fn finish_iteration(&mut self, kind: IterationKind) {
-        match kind {
-            IterationKind::Warm => self.warm_iterations += 1,
-            IterationKind::Image => self.image_iterations += 1,
-        }
+        self.iterations[kind.slot()] += 1;
     }
 
     /// Mean seconds per iteration of `kind` spent in `phase` (0 without iterations).
     #[must_use]
     pub fn mean_seconds(&self, kind: IterationKind, phase: Phase) -> f64 {
-        let slot = Phase::ALL.iter().position(|&p| p == phase).unwrap_or(0);
-        let (total, n) = match kind {
-            IterationKind::Warm => (self.warm[slot], self.warm_iterations),
-            IterationKind::Image => (self.image[slot], self.image_iterations),
-        };
+        let n = self.iterations(kind);
         if n == 0 {
             0.0
         } else {
-            total.as_secs_f64() / n as f64
+            self.totals[kind.slot()][phase.slot()].as_secs_f64() / n as f64
         }
     }
 
     /// Iterations of `kind` timed so far.
     #[must_use]
     pub fn iterations(&self, kind: IterationKind) -> u64 {
-        match kind {
-            IterationKind::Warm => self.warm_iterations,
-            IterationKind::Image => self.image_iterations,
-        }
+        self.iterations[kind.slot()]
     }
 
-    /// `kind,iterations,phase,ms_per_iteration` rows for both kinds, with a header.
+    /// `kind,iterations,phase,ms_per_iteration` rows for every kind, with a header.
     #[must_use]
     pub fn csv(&self) -> String {
         let mut out = String::from("kind,iterations,phase,ms_per_iteration\n");
-        for (kind, name) in [
-            (IterationKind::Warm, "warm"),
-            (IterationKind::Image, "image"),
-        ] {
-            let n = self.iterations(kind);
+        for kind in IterationKind::ALL {
+            let (name, n) = (kind.name(), self.iterations(kind));
             let mut total = 0.0;
             for phase in Phase::ALL {
                 let ms = 1e3 * self.mean_seconds(kind, phase);
@@ -187,6 +203,49 @@ mod tests {
         assert!(csv.contains("image,2,backward,20.000\n"), "{csv}");
         assert!(csv.contains("image,2,total,20.000\n"), "{csv}");
         assert!(csv.contains("warm,1,forward,5.000\n"), "{csv}");
+        assert!(csv.contains("refine,0,total,0.000\n"), "{csv}");
+    }
+
+    #[test]
+    fn slots_follow_the_order_of_all() {
+        for (i, p) in Phase::ALL.iter().enumerate() {
+            assert_eq!(p.slot(), i);
+        }
+        for (i, k) in IterationKind::ALL.iter().enumerate() {
+            assert_eq!(k.slot(), i);
+        }
+    }
+
+    #[test]
+    fn the_kinds_are_kept_apart() {
+        let mut p = StepProfile::default();
+        for (kind, ms) in [
+            (IterationKind::Warm, 1),
+            (IterationKind::Image, 10),
+            (IterationKind::Refine, 100),
+        ] {
+            p.add(kind, Phase::Forward, Duration::from_millis(ms));
+            p.finish_iteration(kind);
+        }
+        for (kind, s) in [
+            (IterationKind::Warm, 0.001),
+            (IterationKind::Image, 0.010),
+            (IterationKind::Refine, 0.100),
+        ] {
+            assert_eq!(p.iterations(kind), 1);
+            assert!(
+                (p.mean_seconds(kind, Phase::Forward) - s).abs() < 1e-9,
+                "{kind:?}"
+            );
+        }
+        let csv = p.csv();
+        let kinds: Vec<&str> = csv
+            .lines()
+            .skip(1)
+            .filter(|l| l.contains(",total,"))
+            .map(|l| l.split(',').next().unwrap_or(""))
+            .collect();
+        assert_eq!(kinds, ["warm", "image", "refine"], "{csv}");
     }
 
     #[test]

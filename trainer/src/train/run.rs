@@ -120,8 +120,7 @@ impl Trainer {
         }
         csv.flush().map_err(io(&csv_path))?;
         self.save_checkpoint(&ckpt)?;
-        let profile_path = dir.join("profile.csv");
-        std::fs::write(&profile_path, self.profile.csv()).map_err(io(&profile_path))?;
+        self.write_profile(dir)?;
         if let Some(corrections) = self.pose_corrections()? {
             let path = dir.join("pose_refinement.csv");
             let names = self.data.skeleton.names();
@@ -141,5 +140,13 @@ impl Trainer {
         }
         bar.finish();
         Ok(())
+    }
+
+    /// Writes `dir/profile.csv`: the milliseconds per iteration of every phase and kind of
+    /// iteration timed by this process ([`profile`]).
+    pub(super) fn write_profile(&self, dir: &Path) -> Result<(), TrainError> {
+        let path = dir.join("profile.csv");
+        skinfield_formats::skf::write_atomic(&path, self.profile.csv().as_bytes())
+            .map_err(|source| TrainError::Io { path, source })
     }
 }

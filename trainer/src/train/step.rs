@@ -96,17 +96,23 @@ impl Trainer {
             )?);
         }
         self.optimiser.set_lr(self.image_lr(self.done));
-        const KIND: IterationKind = IterationKind::Image;
+        // Stage 4's iterations follow stage 1's and pose the full-resolution template when
+        // configured so; they are timed apart.
+        let kind = if self.done < self.config.iterations {
+            IterationKind::Image
+        } else {
+            IterationKind::Refine
+        };
         let mut timer = Timer::start();
         let frames = self.sample(PHASE_IMAGE, self.done);
         let query = self.draw_queries(PHASE_IMAGE, self.done)?;
         let w = self.image_weights(&frames, query.as_ref())?;
-        timer.lap(&mut self.profile, KIND, Phase::Forward);
+        timer.lap(&mut self.profile, kind, Phase::Forward);
         let b = frames.len();
         let skinning = self.frame_skinning(&frames)?;
         let rest = self.rest_at(query.as_ref())?;
         let posed = lbs(&w, &skinning, &rest)?;
-        timer.lap(&mut self.profile, KIND, Phase::Skinning);
+        timer.lap(&mut self.profile, kind, Phase::Skinning);
         let views: Vec<BatchView> = frames
             .iter()
             .enumerate()
@@ -128,7 +134,7 @@ impl Trainer {
         let sb = silhouette.get(0)?;
         let sc = silhouette.get(1)?;
         let (sb_px, sc_px) = (silhouette.get(2)?, silhouette.get(3)?);
-        timer.lap(&mut self.profile, KIND, Phase::Silhouette);
+        timer.lap(&mut self.profile, kind, Phase::Silhouette);
         let v = self.data.template.vertex_count() as f64;
         let init = self.init_at(query.as_ref())?;
         let lap_input = match self.config.laplacian_reference {
@@ -165,9 +171,9 @@ impl Trainer {
         if let Some(r) = &self.pose_refinement {
             terms.push(r.prior(&frames)?);
         }
-        timer.lap(&mut self.profile, KIND, Phase::Regularisers);
+        timer.lap(&mut self.profile, kind, Phase::Regularisers);
         terms.extend(self.rendering_term(&frames, &posed)?);
-        timer.lap(&mut self.profile, KIND, Phase::Rendering);
+        timer.lap(&mut self.profile, kind, Phase::Rendering);
         let total = Tensor::stack(&terms, 0)?.sum_all()?;
         let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
         self.done += 1;
@@ -182,7 +188,7 @@ impl Trainer {
             prior: val(&prior)? + init_entropy,
         };
         let grads = total.backward()?;
-        timer.lap(&mut self.profile, KIND, Phase::Backward);
+        timer.lap(&mut self.profile, kind, Phase::Backward);
         self.optimiser.step(&grads)?;
         // The corrections follow the image iterations' schedule (warm-up, cosine decay).
         let schedule =
@@ -193,8 +199,8 @@ impl Trainer {
         if let Some(a) = &mut self.average {
             a.update()?;
         }
-        timer.lap(&mut self.profile, KIND, Phase::Optimiser);
-        self.profile.finish_iteration(KIND);
+        timer.lap(&mut self.profile, kind, Phase::Optimiser);
+        self.profile.finish_iteration(kind);
         Ok(record)
     }
 

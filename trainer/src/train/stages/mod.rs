@@ -552,6 +552,7 @@ impl Trainer {
             b.finish();
         }
         csv.flush().map_err(io)?;
+        self.write_profile(dir)?;
         Ok(appearance)
     }
 }

@@ -138,10 +138,22 @@ fn shadow_and_refine_stages_run_and_refine_moves_skinnet_with_the_rendering_term
     let mut t = Trainer::new(data, stage_config(5, 5, 3), false).unwrap();
     t.run(dir.path(), false).unwrap();
     let before = t.weights(&[0, 1]).unwrap().to_vec3::<f32>().unwrap();
+    let stage1 = std::fs::read_to_string(dir.path().join("profile.csv")).unwrap();
     t.run_stages(imgs, dir.path(), false).unwrap();
     assert_eq!(rows(dir.path(), "3,").len(), 5);
     let refine = rows(dir.path(), "4,");
     assert_eq!(refine.len(), 3);
+    // profile.csv is rewritten after stage 4 with its iterations timed apart from stage 1's.
+    let image_rows = |csv: &str| -> Vec<String> {
+        csv.lines()
+            .filter(|l| l.starts_with("image,"))
+            .map(|l| l.rsplit_once(',').map_or("", |(k, _)| k).to_owned())
+            .collect()
+    };
+    let profile = std::fs::read_to_string(dir.path().join("profile.csv")).unwrap();
+    assert!(stage1.contains("refine,0,total,"), "{stage1}");
+    assert!(profile.contains("refine,3,total,"), "{profile}");
+    assert_eq!(image_rows(&profile), image_rows(&stage1), "{profile}");
     for &(l, total) in &refine {
         assert!(l > 0.0 && l.is_finite());
         // The step's total includes λ_rend · L_rend.
