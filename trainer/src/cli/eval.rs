@@ -17,8 +17,8 @@ use skinfield_runtime::fast::{FastOptions, Interpolation, NodeMetric};
 use skinfield_trainer::eval::diagnostics::{WorstMeasure, worst_vertices, worst_vertices_markdown};
 use skinfield_trainer::eval::fast::{FastEval, TopKFormat, VsExact, evaluate_fast};
 use skinfield_trainer::eval::{
-    DEFAULT_SAMPLES, EvalOptions, EvalRow, Skinning, evaluate_template, load_template,
-    rows_to_json, rows_to_table,
+    DEFAULT_SAMPLES, EvalOptions, EvalRow, Skinning, WorstVertexCheck, evaluate_template,
+    load_template, off_surface_check, rows_to_json, rows_to_table, worst_vertex_check,
 };
 
 /// `--fast-metric`.
@@ -174,6 +174,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     } else {
         print!("{}", rows_to_table(&rows));
+        print!("{}", checks_against_initial(&rows));
         if !vs_exact.is_empty() {
             println!(
                 "\nfast path vs exact (same frames): vertex distance mean / max (cm), weights L1"
@@ -206,4 +207,93 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The zoo's two worst-vertex checks of every row against the `initial` row (bone heat), frame
+/// by frame, as lines to print under the table; empty without an `initial` row. A fast-path row
+/// is compared too.
+fn checks_against_initial(rows: &[EvalRow]) -> String {
+    let Some(initial) = rows.iter().find(|r| r.method == "initial") else {
+        return String::new();
+    };
+    let mut out = String::from(
+        "\nworst vertex ≤ initial's on every test frame (a row's furthest vertex against bone heat's):\n",
+    );
+    for row in rows.iter().filter(|r| r.method != "initial") {
+        let cell =
+            |check: Option<WorstVertexCheck>| check.map_or_else(|| "–".to_owned(), |c| c.summary());
+        out.push_str(&format!(
+            "{:<13} off surface: {}; vertex to vertex: {}\n",
+            row.method,
+            cell(off_surface_check(row, initial)),
+            cell(worst_vertex_check(row, initial))
+        ));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use skinfield_trainer::eval::FrameRow;
+
+    fn row(method: &str, worst: &[(f64, f64)]) -> EvalRow {
+        EvalRow {
+            method: method.into(),
+            chamfer_cm: 1.0,
+            m2s_cm: 0.5,
+            s2m_cm: 0.5,
+            frames: worst.len(),
+            size: 2.0,
+            chamfer_pct: 0.5,
+            max_vertex_cm: None,
+            max_vertex_pct: None,
+            max_off_surface_cm: None,
+            max_off_surface_pct: None,
+            per_frame: worst
+                .iter()
+                .enumerate()
+                .map(|(frame, &(vertex, surface))| FrameRow {
+                    frame,
+                    m2s_cm: 0.5,
+                    s2m_cm: 0.5,
+                    max_vertex_cm: Some(vertex),
+                    max_off_surface_cm: Some(surface),
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn every_row_is_checked_against_initial() {
+        let rows = [
+            row("initial", &[(3.0, 1.0), (4.0, 2.0)]),
+            row("ours", &[(3.5, 1.0), (4.0, 1.5)]),
+            row("oracle", &[(1.0, 0.5), (1.0, 0.5)]),
+        ];
+        let text = checks_against_initial(&rows);
+        let lines: Vec<&str> = text.lines().skip(2).collect();
+        assert_eq!(lines.len(), 2, "{text}");
+        assert!(
+            lines[0].starts_with("ours ")
+                && lines[0].ends_with(
+                    "off surface: yes (2 frames); vertex to vertex: no: 1 of 2 frames (by up to 0.50 cm)"
+                ),
+            "{text}"
+        );
+        assert!(lines[1].starts_with("oracle "), "{text}");
+        assert!(
+            lines[1].contains("vertex to vertex: yes (2 frames)"),
+            "{text}"
+        );
+        // Rows without per-frame figures get a dash; without an initial row, nothing.
+        let mut bare = row("static", &[]);
+        bare.per_frame.clear();
+        let text = checks_against_initial(&[rows[0].clone(), bare]);
+        assert!(
+            text.contains("off surface: –; vertex to vertex: –"),
+            "{text}"
+        );
+        assert_eq!(checks_against_initial(&rows[1..]), "");
+    }
 }

@@ -78,6 +78,31 @@ impl WorstVertexCheck {
     pub fn passed(&self) -> bool {
         self.frames > 0 && self.failures.is_empty()
     }
+
+    /// The most by which the candidate's worst vertex exceeded the reference's on a failed
+    /// frame (cm; 0 when none failed).
+    #[must_use]
+    pub fn largest_excess(&self) -> f64 {
+        self.failures
+            .iter()
+            .map(|&(_, candidate, reference)| candidate - reference)
+            .fold(0.0, f64::max)
+    }
+
+    /// One line: `yes (24 frames)` or `no: 10 of 24 frames (by up to 2.51 cm)`.
+    #[must_use]
+    pub fn summary(&self) -> String {
+        if self.passed() {
+            format!("yes ({} frames)", self.frames)
+        } else {
+            format!(
+                "no: {} of {} frames (by up to {:.2} cm)",
+                self.failures.len(),
+                self.frames,
+                self.largest_excess()
+            )
+        }
+    }
 }
 
 /// Compares, frame by frame, the worst vertex-to-vertex distance of `candidate` with that of
@@ -297,6 +322,13 @@ mod tests {
             (2, vec![(9, 2.5, 2.0)])
         );
         assert!(!check.passed());
+        assert!((check.largest_excess() - 0.5).abs() < 1e-12);
+        assert_eq!(check.summary(), "no: 1 of 2 frames (by up to 0.50 cm)");
+        let pass = worst_vertex_check(&reference, &reference).unwrap();
+        assert_eq!(
+            (pass.largest_excess(), pass.summary()),
+            (0.0, "yes (2 frames)".into())
+        );
         // Rows on other frames, or without per-vertex figures, cannot be compared.
         candidate.per_frame[1].frame = 10;
         assert!(worst_vertex_check(&candidate, &reference).is_none());
