@@ -233,44 +233,17 @@ pub struct ZooResult {
     /// Whether ours < static < initial in Chamfer distance.
     pub ordering_holds: Option<bool>,
     /// Ours' vertex furthest from the true surface against bone heat's, frame by frame.
-    pub off_surface_ours: Option<CheckSummary>,
+    pub off_surface_ours: Option<WorstVertexCheck>,
     /// The static baseline's vertex furthest from the true surface against bone heat's.
-    pub off_surface_static: Option<CheckSummary>,
+    pub off_surface_static: Option<WorstVertexCheck>,
     /// Ours' worst vertex-to-vertex distance against bone heat's, frame by frame.
-    pub worst_vertex_ours: Option<CheckSummary>,
+    pub worst_vertex_ours: Option<WorstVertexCheck>,
     /// The static baseline's worst vertex-to-vertex distance against bone heat's.
-    pub worst_vertex_static: Option<CheckSummary>,
+    pub worst_vertex_static: Option<WorstVertexCheck>,
     /// Seconds per step.
     pub seconds: Seconds,
     /// Why the character has no (or incomplete) rows.
     pub error: Option<String>,
-}
-
-/// A [`WorstVertexCheck`] for the JSON.
-#[derive(Clone, Debug, Serialize)]
-pub struct CheckSummary {
-    /// Frames compared.
-    pub frames: usize,
-    /// Frames where the candidate's worst vertex is further from the truth than bone heat's:
-    /// `(frame, candidate cm, bone heat cm)`.
-    pub failures: Vec<(usize, f64, f64)>,
-}
-
-impl CheckSummary {
-    /// No frame failed.
-    #[must_use]
-    pub fn passed(&self) -> bool {
-        self.failures.is_empty()
-    }
-}
-
-impl From<WorstVertexCheck> for CheckSummary {
-    fn from(c: WorstVertexCheck) -> Self {
-        Self {
-            frames: c.frames,
-            failures: c.failures,
-        }
-    }
 }
 
 /// Runs `trainer zoo`.
@@ -607,10 +580,10 @@ fn fill_character(
     result.ordering_holds = Some(
         ours.chamfer_cm < static_row.chamfer_cm && static_row.chamfer_cm < initial_row.chamfer_cm,
     );
-    result.off_surface_ours = off_surface_check(ours, initial_row).map(Into::into);
-    result.off_surface_static = off_surface_check(static_row, initial_row).map(Into::into);
-    result.worst_vertex_ours = worst_vertex_check(ours, initial_row).map(Into::into);
-    result.worst_vertex_static = worst_vertex_check(static_row, initial_row).map(Into::into);
+    result.off_surface_ours = off_surface_check(ours, initial_row);
+    result.off_surface_static = off_surface_check(static_row, initial_row);
+    result.worst_vertex_ours = worst_vertex_check(ours, initial_row);
+    result.worst_vertex_static = worst_vertex_check(static_row, initial_row);
     result.rows = rows;
     Ok(())
 }

@@ -62,8 +62,9 @@ pub struct FrameRow {
     pub max_off_surface_cm: Option<f64>,
 }
 
-/// The outcome of [`worst_vertex_check`].
-#[derive(Clone, Debug, PartialEq)]
+/// The outcome of [`worst_vertex_check`] (and [`off_surface_check`]); serialised as is in
+/// `trainer zoo`'s JSON.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct WorstVertexCheck {
     /// Frames compared.
     pub frames: usize,

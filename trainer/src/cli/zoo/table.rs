@@ -9,7 +9,8 @@ use skinfield_formats::skf::write_atomic;
 use skinfield_trainer::eval::percent_of_size;
 use skinfield_trainer::train::WarmStatus;
 
-use super::{Args, Budget, CheckSummary, ZooResult};
+use super::{Args, Budget, ZooResult};
+use skinfield_trainer::eval::WorstVertexCheck;
 
 #[derive(Serialize)]
 struct ZooJson<'a> {
@@ -57,16 +58,12 @@ fn warm_start_cell(warm: Option<&WarmStatus>) -> String {
 /// A worst-vertex check as a table cell; a failure also says by how much the row's worst vertex
 /// exceeded bone heat's on the frame where it did most, in cm and in percent of the character's
 /// `size` (file units, so that a spike reads differently from a millimetre).
-fn check_cell(check: Option<&CheckSummary>, size: f64) -> String {
+fn check_cell(check: Option<&WorstVertexCheck>, size: f64) -> String {
     match check {
         None => "–".into(),
         Some(c) if c.passed() => format!("yes ({} frames)", c.frames),
         Some(c) => {
-            let excess = c
-                .failures
-                .iter()
-                .map(|&(_, ours, initial)| ours - initial)
-                .fold(0.0, f64::max);
+            let excess = c.largest_excess();
             let percent = if size > 0.0 {
                 format!(", {:.2} % of size", percent_of_size(excess, size))
             } else {
@@ -83,7 +80,7 @@ fn check_cell(check: Option<&CheckSummary>, size: f64) -> String {
 
 /// Which characters meet the ordering and each worst-vertex check, as one paragraph.
 fn criteria_summary(results: &[ZooResult]) -> String {
-    let passed = |c: &Option<CheckSummary>| c.as_ref().is_some_and(CheckSummary::passed);
+    let passed = |c: &Option<WorstVertexCheck>| c.as_ref().is_some_and(WorstVertexCheck::passed);
     let names = |keep: &dyn Fn(&ZooResult) -> bool| -> String {
         let met: Vec<&str> = results
             .iter()
@@ -328,7 +325,7 @@ mod tests {
 
     #[test]
     fn a_worst_vertex_cell_says_by_how_much_a_row_failed() {
-        let failed = CheckSummary {
+        let failed = WorstVertexCheck {
             frames: 24,
             failures: vec![(80, 1.01, 0.66), (88, 3.53, 3.29)],
         };
@@ -336,7 +333,7 @@ mod tests {
             check_cell(Some(&failed), 2.5),
             "**no**: 2 of 24 frames (by up to 0.35 cm, 0.14 % of size)"
         );
-        let passed = CheckSummary {
+        let passed = WorstVertexCheck {
             frames: 8,
             failures: Vec::new(),
         };
@@ -371,7 +368,7 @@ mod tests {
     #[test]
     fn the_summary_counts_each_check_separately() {
         let check = |failures: Vec<(usize, f64, f64)>| {
-            Some(CheckSummary {
+            Some(WorstVertexCheck {
                 frames: 4,
                 failures,
             })
