@@ -61,6 +61,11 @@ pub struct Args {
     /// (what a human-parsing network gets wrong), 0 to 1.
     #[arg(long, default_value_t = 0.0)]
     pub label_noise: f32,
+    /// Pixels by which every mask's outline is moved outwards (negative: inwards), as a
+    /// segmentation that over- or under-segments by a constant margin; the images and the
+    /// ground truth stay exact.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub mask_offset: f32,
     /// Also write 2D keypoint detections (OpenPose JSON) projected from the motion, for
     /// `trainer track`.
     #[arg(long)]
@@ -99,6 +104,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             TestMotionsArg::HeldOutPhases => TestMotions::HeldOutPhases,
         },
         label_noise: args.label_noise,
+        mask_offset_px: args.mask_offset,
         seed: args.seed,
         ..SynthConfig::default()
     };

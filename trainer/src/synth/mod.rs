@@ -18,6 +18,7 @@ pub mod deform;
 pub mod gltf_character;
 pub mod gltf_source;
 pub mod labels;
+pub mod mask_error;
 pub mod motion;
 pub mod output;
 pub mod rig;
@@ -81,9 +82,17 @@ pub struct SynthConfig {
     /// Share of the part-label images' boundary pixels given a neighbouring part's label
     /// ([`labels::with_boundary_noise`]); 0 writes exact labels.
     pub label_noise: f32,
+    /// Pixels by which every mask's outline is moved outwards (inwards when negative), as a
+    /// segmentation that over- or under-segments by a constant margin
+    /// ([`mask_error::offset_coverage`]); 0 writes exact masks. The images and the ground truth
+    /// stay exact.
+    pub mask_offset_px: f32,
     /// Seed of every random choice (colour noise, motion amplitudes, camera jitter).
     pub seed: u64,
 }
+
+/// The largest outline offset [`SynthConfig::mask_offset_px`] accepts, in pixels.
+pub const MAX_MASK_OFFSET_PX: f32 = 16.0;
 
 impl Default for SynthConfig {
     fn default() -> Self {
@@ -99,6 +108,7 @@ impl Default for SynthConfig {
             image_format: ImageFormat::Png,
             test_motions: TestMotions::Novel,
             label_noise: 0.0,
+            mask_offset_px: 0.0,
             seed: 0,
         }
     }
@@ -120,6 +130,7 @@ impl SynthConfig {
             image_format: ImageFormat::Png,
             test_motions: TestMotions::Novel,
             label_noise: 0.0,
+            mask_offset_px: 0.0,
             seed: 0,
         }
     }
@@ -157,6 +168,9 @@ impl SynthConfig {
         }
         if !(0.0..=1.0).contains(&self.label_noise) {
             return bad("label_noise", "must be in [0, 1]");
+        }
+        if !(-MAX_MASK_OFFSET_PX..=MAX_MASK_OFFSET_PX).contains(&self.mask_offset_px) {
+            return bad("mask_offset_px", "must be within ±16 pixels");
         }
         if !(16..=4096).contains(&self.shadow_map) {
             return bad("shadow_map", "must be 16 to 4096 texels");

@@ -255,12 +255,13 @@ pub fn write_subject(
                     &shadow,
                 );
                 writer.write_image(c, f, &rgb)?;
+                let (w, h) = (camera.width as usize, camera.height as usize);
+                let mask = super::mask_error::offset_coverage(&mask, w, h, config.mask_offset_px);
                 writer.write_mask(c, f, &mask)?;
                 if let Some(parts) = parts {
                     let labels =
                         render_labels(camera, &positions, &subject.template.triangles, parts);
                     let seed = config.seed ^ ((f as u64) << 32 | c as u64);
-                    let (w, h) = (camera.width as usize, camera.height as usize);
                     let labels = with_boundary_noise(&labels, w, h, config.label_noise, seed);
                     writer.write_labels(c, f, &labels)?;
                 }

@@ -2,7 +2,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use glam::{Mat4, Quat, Vec3};
-use skinfield_formats::capture::{NO_LABEL, load_capture};
+use skinfield_formats::capture::{Capture, NO_LABEL, load_capture};
+
+use crate::losses::silhouette::outline::Outline;
 
 use super::body::Part;
 use super::character::{bind_positions, joint};
@@ -644,6 +646,9 @@ fn every_invalid_config_field_is_named() {
         ("grid", with(|c| c.grid = 601)),
         ("target_vertices", with(|c| c.target_vertices = 10)),
         ("shadow_map", with(|c| c.shadow_map = 8)),
+        ("label_noise", with(|c| c.label_noise = 1.5)),
+        ("mask_offset_px", with(|c| c.mask_offset_px = 17.0)),
+        ("mask_offset_px", with(|c| c.mask_offset_px = f32::NAN)),
         (
             "test_frames_per_clip",
             with(|c| {
@@ -727,4 +732,45 @@ fn exr_images_carry_the_same_pixels_as_png_before_quantisation() {
         assert!((*x - *y).abs().max_element() < 0.006, "{x} vs {y}");
     }
     assert!(pb.rgb.iter().any(|p| p.max_element() > 0.1));
+}
+
+#[test]
+fn a_mask_offset_moves_only_the_masks() {
+    let (exact, grown) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    synthesize(exact.path(), &small()).unwrap();
+    let offset = SynthConfig {
+        mask_offset_px: 1.0,
+        ..small()
+    };
+    synthesize(grown.path(), &offset).unwrap();
+    let (a, b) = (tree(exact.path()), tree(grown.path()));
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    let masks = a.keys().filter(|k| k.starts_with("masks/")).count();
+    assert!(masks > 0);
+    for (k, v) in &a {
+        if k.starts_with("masks/") {
+            assert_ne!(b[k], *v, "{k} unchanged");
+        } else if !k.ends_with("capture.json") {
+            assert!(b[k] == *v, "{k} changed");
+        }
+    }
+    // Each mask grows by about its outline's length times one pixel.
+    let (ca, cb) = (
+        load_capture(exact.path()).unwrap(),
+        load_capture(grown.path()).unwrap(),
+    );
+    let area = |c: &Capture| -> f32 { c.load_mask(0, 0).unwrap().coverage.iter().sum() };
+    let mask = ca.load_mask(0, 0).unwrap();
+    let outline =
+        Outline::from_coverage(mask.width as usize, mask.height as usize, &mask.coverage).unwrap();
+    let length: f32 = outline
+        .segments
+        .iter()
+        .map(|s| (s[1] - s[0]).length())
+        .sum();
+    let grown_by = area(&cb) - area(&ca);
+    assert!(
+        (grown_by - length).abs() < 0.2 * length,
+        "area +{grown_by} px² against an outline of {length} px"
+    );
 }
