@@ -411,6 +411,9 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
     if let Some((iteration, _)) = trainer.best_validation() {
         println!("  (the parameter average at image iteration {iteration} scored best)");
     }
+    if let Some(margin) = report.mask_margin() {
+        eprintln!("warning: {margin}.");
+    }
     if let Some(worse) = report
         .guard(trainer.config().refuse_worse_than_initial)
         .map_err(|e| {

@@ -60,6 +60,7 @@ impl Trainer {
                         score.contour_px,
                         score.silhouette_px,
                         score.iou,
+                        score.outline_offset_px,
                     ],
                     &Device::Cpu,
                 )?,
@@ -141,11 +142,17 @@ impl Trainer {
                 let s = score
                     .to_vec1::<f64>()
                     .map_err(|e| bad(format!("`{prefix}best.score`: {e}")))?;
-                let [boundary_px, contour_px, silhouette_px, iou] = s[..] else {
-                    return Err(bad(format!(
-                        "`{prefix}best.score` has {} values, expected 4",
-                        s.len()
-                    )));
+                // Checkpoints written before the outline offset existed hold four values; the
+                // offset is then unknown (NaN). Only the silhouette distance ranks checkpoints.
+                let (boundary_px, contour_px, silhouette_px, iou, outline_offset_px) = match s[..] {
+                    [b, c, s, i] => (b, c, s, i, f64::NAN),
+                    [b, c, s, i, o] => (b, c, s, i, o),
+                    _ => {
+                        return Err(bad(format!(
+                            "`{prefix}best.score` has {} values, expected 4 or 5",
+                            s.len()
+                        )));
+                    }
                 };
                 let meta = read_u64s(tensors, &format!("{prefix}best.meta"), 2).map_err(&bad)?;
                 let param_prefix = format!("{prefix}best.param.");
@@ -164,6 +171,7 @@ impl Trainer {
                         contour_px,
                         silhouette_px,
                         iou,
+                        outline_offset_px,
                         views,
                     },
                     meta[0],

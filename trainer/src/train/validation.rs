@@ -43,6 +43,11 @@ pub struct ValidationScore {
     pub silhouette_px: f64,
     /// Intersection over union of the rasterised mesh with the mask coverage.
     pub iou: f64,
+    /// How far the masks' outlines lie outside the mesh's, on average over their length
+    /// (pixels; negative: inside): the masks' area minus the mesh's, over the masks' outline
+    /// length. Near zero when the weights explain the masks; a model that cannot follow masks
+    /// grown or shrunk by a biased segmentation keeps a share of that bias here.
+    pub outline_offset_px: f64,
     /// Views scored.
     pub views: usize,
 }
@@ -59,8 +64,9 @@ impl fmt::Display for ValidationScore {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "silhouette {:.4} px (boundary {:.4}, contour {:.4}), IoU {:.5}",
-            self.silhouette_px, self.boundary_px, self.contour_px, self.iou
+            "silhouette {:.4} px (boundary {:.4}, contour {:.4}), IoU {:.5}, masks {:+.3} px \
+             outside the mesh",
+            self.silhouette_px, self.boundary_px, self.contour_px, self.iou, self.outline_offset_px
         )
     }
 }
@@ -99,6 +105,42 @@ impl ValidationReport {
         };
         if refuse { Err(worse) } else { Ok(Some(worse)) }
     }
+
+    /// The masks' margin over the trained model's outline when it exceeds
+    /// [`MASK_MARGIN_WARNING_PX`] either way: the sign of masks grown or shrunk by their
+    /// segmentation, which the silhouette loss (unbiased at the masks' 50 % outline) makes the
+    /// weights follow at the truth's expense, and which the guard cannot see, being scored
+    /// against the same masks. `None` when the model explains the masks' extent.
+    #[must_use]
+    pub fn mask_margin(&self) -> Option<MaskMargin> {
+        let px = self.model.outline_offset_px;
+        (px.abs() > MASK_MARGIN_WARNING_PX).then_some(MaskMargin {
+            model_px: px,
+            initial_px: self.initial.outline_offset_px,
+        })
+    }
+}
+
+/// The margin of the masks over a trained model's outline above which training warns
+/// ([`ValidationReport::mask_margin`]), in pixels. Models trained on exact masks leave
+/// 0.02–0.05 px (the zoo's characters); masks grown or shrunk by one pixel leave about 0.7 px
+/// (the built-in capture; `docs/experiments/fidelity.md`).
+pub const MASK_MARGIN_WARNING_PX: f64 = 0.25;
+
+/// The masks lie further outside (or inside) the trained model's outline than exact masks would
+/// leave them ([`ValidationReport::mask_margin`]).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "the masks lie {model_px:+.2} px outside the trained model's outline on average (bone heat: \
+     {initial_px:+.2} px; exact masks leave less than {MASK_MARGIN_WARNING_PX} px): masks that \
+     their segmentation grew (or shrank) by a margin do this, and the weights then follow the \
+     margin instead of the body; check the masks"
+)]
+pub struct MaskMargin {
+    /// The margin over the trained model (pixels; negative: the masks lie inside).
+    pub model_px: f64,
+    /// The margin over the initial weights' outline.
+    pub initial_px: f64,
 }
 
 /// A trained model explains the validation silhouettes worse than its initial weights.
@@ -182,6 +224,9 @@ pub fn score_posed(
         contour_weight: f64,
         intersection: f64,
         union: f64,
+        mask_area: f64,
+        mesh_area: f64,
+        outline_length: f64,
     }
     let per_view: Vec<ViewScore> = frames
         .par_iter()
@@ -196,9 +241,12 @@ pub fn score_posed(
                         view_terms(&view.camera, &view.target, posed, triangles, edges, 1.0);
                     let mesh = crate::raster::coverage(&view.camera, posed, triangles, IOU_SAMPLES);
                     let (mut intersection, mut union) = (0.0f64, 0.0f64);
+                    let (mut mesh_area, mut mask_area) = (0.0f64, 0.0f64);
                     for (&a, &b) in mesh.iter().zip(view.coverage.iter()) {
                         intersection += f64::from(a.min(b));
                         union += f64::from(a.max(b));
+                        mesh_area += f64::from(a);
+                        mask_area += f64::from(b);
                     }
                     ViewScore {
                         boundary: terms.boundary_distance,
@@ -207,6 +255,14 @@ pub fn score_posed(
                         contour_weight: terms.contour_weight,
                         intersection,
                         union,
+                        mask_area,
+                        mesh_area,
+                        outline_length: view
+                            .target
+                            .contour_weights
+                            .iter()
+                            .map(|&w| f64::from(w))
+                            .sum(),
                     }
                 })
                 .collect::<Vec<_>>()
@@ -221,6 +277,8 @@ pub fn score_posed(
         contour_px,
         silhouette_px: 0.5 * (boundary_px + contour_px),
         iou: sum(|s| s.intersection) / sum(|s| s.union).max(1e-12),
+        outline_offset_px: (sum(|s| s.mask_area) - sum(|s| s.mesh_area))
+            / sum(|s| s.outline_length).max(1e-12),
         views: per_view.len(),
     }
 }
@@ -269,5 +327,61 @@ mod tests {
             ..ValidationScore::default()
         };
         assert!(b.is_worse_than(&a) && !a.is_worse_than(&b) && !a.is_worse_than(&a));
+    }
+}
+
+#[cfg(test)]
+mod offset_tests {
+    use super::*;
+    use crate::train::tests::{scene, tube_posed};
+
+    /// The tube of the training tests posed with its true weights, its cross-section scaled by
+    /// `radial` about the tube's axis (`radial` > 1: the mesh is wider than the masks).
+    fn scored(radial: f32) -> ValidationScore {
+        let (data, truth) = scene(2);
+        let t = &data.template;
+        let posed: Vec<Vec<Vec3>> = data
+            .frames
+            .iter()
+            .map(|f| {
+                let rest: Vec<Vec3> = t
+                    .positions
+                    .iter()
+                    .map(|p| Vec3::new(p.x * radial, p.y, p.z * radial))
+                    .collect();
+                tube_posed(&rest, &f.skinning, &truth)
+            })
+            .collect();
+        let edges = EdgeTable::new(t.vertex_count(), &t.triangles);
+        score_posed(&data.frames, &posed, &t.triangles, &edges)
+    }
+
+    #[test]
+    fn the_outline_offset_is_the_masks_margin_over_the_mesh() {
+        // The truth explains its own masks: no margin, but for the difference between the
+        // mesh's coverage, sampled 2 × 2, and the masks', 4 × 4 (0.06 px on this tube a few
+        // pixels wide).
+        let exact = scored(1.0);
+        assert!(exact.outline_offset_px.abs() < 0.1, "{exact}");
+        // A mesh 20 % thinner than the masks leaves them outside it, by a fifth of the tube's
+        // radius in pixels (0.61 px here); one 20 % wider leaves them as far inside.
+        let (thin, wide) = (scored(0.8), scored(1.2));
+        assert!(thin.outline_offset_px > 0.2, "{thin}");
+        assert!(wide.outline_offset_px < -0.2, "{wide}");
+        assert!(
+            (thin.outline_offset_px + wide.outline_offset_px).abs() < 0.25 * thin.outline_offset_px,
+            "{thin} / {wide}"
+        );
+        // Training warns about the thin and the wide model, not about the exact one.
+        let report = |model: ValidationScore| ValidationReport {
+            initial: exact,
+            model,
+            held_out_frames: 2,
+        };
+        assert_eq!(report(exact).mask_margin(), None);
+        let warned = report(thin).mask_margin().expect("a margin");
+        assert_eq!(warned.model_px, thin.outline_offset_px);
+        assert!(warned.to_string().contains("+0.61 px outside"), "{warned}");
+        assert!(report(wide).mask_margin().is_some());
     }
 }
