@@ -114,6 +114,17 @@ fn stage_four_moves_to_the_full_resolution_template() {
         )
         .unwrap();
         assert_eq!(stages.lines().filter(|l| l.starts_with("4,")).count(), 2);
+        // The profile rewritten after stage 4 keeps stage 1's timings, also when stage 4
+        // moved to the full-resolution template.
+        let profile = std::fs::read_to_string(
+            tmp.path()
+                .join(format!("m{full_resolution}.skf.work/profile.csv")),
+        )
+        .unwrap();
+        for kind in ["image,4,total,", "refine,2,total,"] {
+            assert!(profile.contains(kind), "{kind}: {profile}");
+        }
+        assert!(!profile.contains("warm,0,"), "{profile}");
         view.candidates().map_or(0, |c| c.len())
     };
     let (coarse, fine) = (anchors(false), anchors(true));

@@ -93,6 +93,8 @@ impl Trainer {
             "",
             Path::new("(the run moved to other training data)"),
         )?;
+        // The timings so far belong to the same run (`profile.csv` is rewritten after stage 4).
+        moved.profile = self.profile.clone();
         Ok(moved)
     }
 
