@@ -387,19 +387,21 @@ pub fn diagnostics_markdown(
         s,
         "\n## Image terms on the truth and on each method\n\nEvery {stride}th training frame, \
          all views, full template resolution: the mean distance between mesh silhouette and \
-         mask outline (pixels; no Huber) and the IoU of the rasterised mesh with the mask. The \
-         truth should score lowest.\n"
+         mask outline (pixels; no Huber), the IoU of the rasterised mesh with the mask, and how \
+         far the masks lie outside the mesh on average (their area minus the mesh's over their \
+         outline length, pixels; near zero on the truth unless the masks are biased). The truth \
+         should score lowest.\n"
     );
     let _ = writeln!(
         s,
-        "| mesh | silhouette (px) | boundary (px) | contour (px) | IoU |"
+        "| mesh | silhouette (px) | boundary (px) | contour (px) | IoU | masks outside the mesh (px) |"
     );
-    let _ = writeln!(s, "| --- | --- | --- | --- | --- |");
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- |");
     for (name, t) in terms {
         let _ = writeln!(
             s,
-            "| {name} | {:.4} | {:.4} | {:.4} | {:.5} |",
-            t.silhouette_px, t.boundary_px, t.contour_px, t.iou
+            "| {name} | {:.4} | {:.4} | {:.4} | {:.5} | {:+.3} |",
+            t.silhouette_px, t.boundary_px, t.contour_px, t.iou, t.outline_offset_px
         );
     }
     s
@@ -547,6 +549,18 @@ mod tests {
         );
         let md = diagnostics_markdown(&[], &[], &rows, 1);
         assert!(md.contains("| truth |") && md.contains("| initial |"));
+        // The truth leaves its exact masks no margin; masks grown by a pixel lie a pixel
+        // outside it.
+        assert!(truth.outline_offset_px.abs() < 0.2, "{truth}");
+        let grown = tempfile::tempdir().unwrap();
+        let config = crate::synth::SynthConfig {
+            mask_offset_px: 1.0,
+            ..crate::synth::SynthConfig::tiny()
+        };
+        crate::synth::synthesize(grown.path(), &config).unwrap();
+        let rows = terms_on_truth(&load_capture(grown.path()).unwrap(), &[], 1).unwrap();
+        let margin = rows[0].1.outline_offset_px;
+        assert!((margin - 1.0).abs() < 0.25, "{}", rows[0].1);
     }
     #[test]
     fn outline_views_count_vertices_on_a_true_outline_and_split_the_errors() {
