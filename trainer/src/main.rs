@@ -73,17 +73,54 @@ fn main() {
         Command::Template(args) => cli::template::run(args),
     };
     if let Err(e) = result {
-        // One line: the context chain joined, so the file and the field are both named.
-        eprintln!("trainer: {e:#}");
+        eprintln!("trainer: {}", one_line(&e));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes on one line, so the file and the field are both named. A cause that
+/// the message above it already ends with is said once: the library errors name their I/O
+/// cause in their own message (for callers that print only that) and also report it as their
+/// source.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if !out.is_empty() && out.ends_with(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use clap::CommandFactory;
 
-    use super::Cli;
+    use super::{Cli, one_line};
+
+    #[test]
+    fn a_cause_is_said_once() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("capture/template.json: {source}")]
+        struct Read {
+            #[source]
+            source: std::io::Error,
+        }
+        let io = || std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        let e = anyhow::Error::new(Read { source: io() }).context("loading the capture");
+        assert_eq!(
+            one_line(&e),
+            "loading the capture: capture/template.json: no such file"
+        );
+        // A cause the message does not contain is still printed.
+        let e = anyhow::Error::new(io()).context("reading capture/template.json");
+        assert_eq!(one_line(&e), "reading capture/template.json: no such file");
+    }
 
     /// Clap's own consistency checks (duplicate argument ids from flattened groups, conflicting
     /// names, bad defaults), which otherwise surface only when a user runs the command.
