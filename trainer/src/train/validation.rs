@@ -123,7 +123,7 @@ impl ValidationReport {
 
 /// The margin of the masks over a trained model's outline above which training warns
 /// ([`ValidationReport::mask_margin`]), in pixels. Models trained on exact masks leave
-/// 0.02–0.05 px (the zoo's characters); masks grown or shrunk by one pixel leave about 0.7 px
+/// 0.02–0.06 px (the five zoo characters); masks grown or shrunk by one pixel leave about 0.7 px
 /// (the built-in capture; `docs/experiments/fidelity.md`).
 pub const MASK_MARGIN_WARNING_PX: f64 = 0.25;
 
