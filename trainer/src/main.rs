@@ -82,7 +82,7 @@ fn main() {
 /// the message above it already ends with is said once: the library errors name their I/O
 /// cause in their own message (for callers that print only that) and also report it as their
 /// source.
-fn one_line(e: &anyhow::Error) -> String {
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
     let mut out = String::new();
     for cause in e.chain() {
         let text = cause.to_string();

@@ -569,7 +569,7 @@ mod tests {
         let missing = dir.path().join("missing.json");
         let e = base_config(&args(&["--config", missing.to_str().unwrap()])).unwrap_err();
         // The whole chain, as `trainer` prints it, names the file and the cause once.
-        let e = format!("{e:#}");
+        let e = crate::one_line(&e);
         assert!(e.contains("missing.json"), "{e}");
         assert_eq!(e.matches("os error").count(), 1, "{e}");
         // Flags that make an invalid configuration are refused too.

@@ -325,25 +325,27 @@ mod reach_serde {
 
 /// Why a configuration file could not be used.
 ///
-/// The cause is part of the message rather than a `source()`, so a reporter that prints the
-/// whole chain (`{:#}`) names it once.
+/// The cause is named in the message (for callers that print only that) and is also the
+/// `source()`, like the project's other errors; `trainer` prints a cause once.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// Reading failed.
-    #[error("{path}: {cause}")]
+    #[error("{path}: {source}")]
     Io {
         /// The file.
         path: std::path::PathBuf,
         /// The cause.
-        cause: std::io::Error,
+        #[source]
+        source: std::io::Error,
     },
     /// Not valid JSON for a [`TrainConfig`] (serde names the field).
-    #[error("{path}: {cause}")]
+    #[error("{path}: {source}")]
     Parse {
         /// The file.
         path: std::path::PathBuf,
         /// The cause.
-        cause: serde_json::Error,
+        #[source]
+        source: serde_json::Error,
     },
     /// A value out of range.
     #[error("{path}: field `{field}` is invalid")]
@@ -358,9 +360,9 @@ pub enum ConfigError {
 impl TrainConfig {
     /// Reads and validates a JSON configuration.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|cause| ConfigError::Io {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
             path: path.to_owned(),
-            cause,
+            source,
         })?;
         Self::parse(&text, path)
     }
@@ -368,9 +370,9 @@ impl TrainConfig {
     /// A configuration from the JSON text of the file `path` (named in the errors), checked
     /// as [`TrainConfig::load`] checks it: for a caller that also keeps the text.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
-        let c: Self = serde_json::from_str(text).map_err(|cause| ConfigError::Parse {
+        let c: Self = serde_json::from_str(text).map_err(|source| ConfigError::Parse {
             path: path.to_owned(),
-            cause,
+            source,
         })?;
         c.validate().map_err(|field| ConfigError::Field {
             path: path.to_owned(),

@@ -455,6 +455,12 @@ impl Trainer {
         self.warm_settings().lr * 0.5f64.powi(halvings as i32)
     }
 
+    /// Whether the image iteration after `done` belongs to stage 1 (stage 4's iterations follow
+    /// stage 1's, numbered on).
+    fn in_stage_one(&self, done: u64) -> bool {
+        done < self.config.iterations
+    }
+
     /// The learning rate of image iteration `done` (0-based). Stage 1: a linear ramp over
     /// `lr_warmup` iterations, then a half cosine from the full rate down to `lr_final_fraction`
     /// of it at its last iteration. Stage 4 (iterations past stage 1's) follows the same
@@ -462,7 +468,7 @@ impl Trainer {
     /// [`StageConfig::refine_lr_fraction`](stages::StageConfig::refine_lr_fraction).
     fn image_lr(&self, done: u64) -> f64 {
         let base = Self::adam_config(&self.config, self.is_static()).lr;
-        let (ramp, start, len, peak) = if done < self.config.iterations {
+        let (ramp, start, len, peak) = if self.in_stage_one(done) {
             (self.config.lr_warmup, 0, self.config.iterations, 1.0)
         } else {
             let s = &self.config.stages;

@@ -98,7 +98,7 @@ impl Trainer {
         self.optimiser.set_lr(self.image_lr(self.done));
         // Stage 4's iterations follow stage 1's and pose the full-resolution template when
         // configured so; they are timed apart.
-        let kind = if self.done < self.config.iterations {
+        let kind = if self.in_stage_one(self.done) {
             IterationKind::Image
         } else {
             IterationKind::Refine

@@ -301,6 +301,7 @@ fn pose(rest: &[Vec3], w: &[f32], skinning: &[Mat4]) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::tests::{scene, tube_posed};
 
     #[test]
     fn pose_blends_the_transformed_points() {
@@ -328,12 +329,6 @@ mod tests {
         };
         assert!(b.is_worse_than(&a) && !a.is_worse_than(&b) && !a.is_worse_than(&a));
     }
-}
-
-#[cfg(test)]
-mod offset_tests {
-    use super::*;
-    use crate::train::tests::{scene, tube_posed};
 
     /// The tube of the training tests posed with its true weights, its cross-section scaled by
     /// `radial` about the tube's axis (`radial` > 1: the mesh is wider than the masks).
