@@ -131,3 +131,56 @@ fn stage_four_moves_to_the_full_resolution_template() {
     assert!(coarse < full * 2 / 5, "{coarse} of {full}");
     assert_eq!(fine, full);
 }
+
+/// `--outline-offsets` learns one offset per camera through stage 1 and stage 4 (moved to the
+/// full-resolution template), prints them, writes them to the work folder, and a finished run
+/// resumed writes the same model.
+#[test]
+fn outline_offsets_are_learned_printed_and_resumed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cap = four_camera_capture(tmp.path(), "2");
+    let config = tmp.path().join("c.json");
+    std::fs::write(
+        &config,
+        r#"{"iterations": 4, "warm_start_iterations": 4, "validation_every": 2,
+            "stages": {"refine_iterations": 2, "rendering_weight": 0, "full_resolution": true}}"#,
+    )
+    .unwrap();
+    let model = tmp.path().join("m.skf");
+    let train = |extra: &[&str]| {
+        let mut args = vec!["--train-vertices", "600", "--outline-offsets"];
+        args.extend_from_slice(extra);
+        common::train(
+            cap.to_str().unwrap(),
+            model.to_str().unwrap(),
+            config.to_str().unwrap(),
+            &args,
+        )
+    };
+    let (code, out, err) = train(&[]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("learned outline offsets: the masks lie") && out.contains("over 4 cameras"),
+        "{out}"
+    );
+    let csv_path = tmp.path().join("m.skf.work/outline_offsets.csv");
+    let csv = std::fs::read_to_string(&csv_path).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], "camera,offset_px");
+    assert_eq!(lines.len(), 5, "{csv}");
+    let offsets: Vec<f32> = lines[1..]
+        .iter()
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect();
+    // Six image iterations at up to 1e-2 px each (the schedule's warm-up ramps them in).
+    assert!(
+        offsets.iter().all(|b| b.is_finite() && b.abs() <= 0.06)
+            && offsets.iter().any(|&b| b != 0.0),
+        "{offsets:?}"
+    );
+    let written = std::fs::read(&model).unwrap();
+    let (code, _, err) = train(&["--resume"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read(&model).unwrap(), written);
+    assert_eq!(std::fs::read_to_string(&csv_path).unwrap(), csv);
+}

@@ -54,6 +54,12 @@ pub struct Args {
     /// folder.
     #[arg(long)]
     pub refine_poses: bool,
+    /// Learn one outline offset per camera with the weights (`outline_offset.enabled` in the
+    /// configuration): for masks from a segmentation whose outlines may lie a fraction of a
+    /// pixel to a pixel outside or inside the subject's. Written to `outline_offsets.csv` in the
+    /// work folder.
+    #[arg(long)]
+    pub outline_offsets: bool,
 }
 
 /// Runs `trainer train`.
@@ -66,6 +72,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.refine_poses {
         config.pose_refinement.enabled = true;
+    }
+    if args.outline_offsets {
+        config.outline_offset.enabled = true;
     }
     let work = args
         .work
@@ -411,6 +420,9 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
     if let Some((iteration, _)) = trainer.best_validation() {
         println!("  (the parameter average at image iteration {iteration} scored best)");
     }
+    if let Some(offsets) = trainer.outline_offsets()? {
+        println!("  {}", describe_outline_offsets(&offsets));
+    }
     if let Some(margin) = report.mask_margin() {
         eprintln!("warning: {margin}.");
     }
@@ -429,6 +441,20 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// One line on the learned outline offsets: their mean and range over the cameras.
+#[must_use]
+pub fn describe_outline_offsets(offsets: &[f32]) -> String {
+    let n = offsets.len().max(1) as f64;
+    let mean = offsets.iter().map(|&b| f64::from(b)).sum::<f64>() / n;
+    let lo = offsets.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = offsets.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    format!(
+        "learned outline offsets: the masks lie {mean:+.3} px outside the model's outline on \
+         average ({lo:+.3} to {hi:+.3} over {} cameras; outline_offsets.csv)",
+        offsets.len()
+    )
 }
 
 /// Says how the warm start ended: converged, or stopped at its cap (a warning on stderr: the

@@ -339,7 +339,7 @@ pub fn terms_on_truth(
     if let Some(truth) = truth {
         rows.push((
             "truth".to_string(),
-            score_posed(&data.frames, &truth, triangles, &edges),
+            score_posed(&data.frames, &truth, triangles, &edges, None),
         ));
     }
     for m in methods {
@@ -349,7 +349,7 @@ pub fn terms_on_truth(
             .collect::<Result<Vec<_>, _>>()?;
         rows.push((
             m.method_name().to_string(),
-            score_posed(&data.frames, &posed, triangles, &edges),
+            score_posed(&data.frames, &posed, triangles, &edges, None),
         ));
     }
     Ok(rows)

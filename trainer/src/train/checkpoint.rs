@@ -31,6 +31,11 @@ impl Trainer {
                 tensors.insert(format!("{prefix}{k}"), v);
             }
         }
+        if let Some(o) = &self.outline_offsets {
+            for (k, v) in o.state_tensors()? {
+                tensors.insert(format!("{prefix}{k}"), v);
+            }
+        }
         let window: Vec<f64> = self.warm_window.iter().flat_map(|w| [w.0, w.1]).collect();
         let n = self.warm_window.len();
         tensors.insert(
@@ -134,6 +139,9 @@ impl Trainer {
         };
         if let Some(r) = &mut self.pose_refinement {
             r.load_state_tensors(&state).map_err(&bad)?;
+        }
+        if let Some(o) = &mut self.outline_offsets {
+            o.load_state_tensors(&state).map_err(&bad)?;
         }
         let p = read_u64s(tensors, &format!("{prefix}progress"), 2).map_err(&bad)?;
         self.warm_done = p[0];

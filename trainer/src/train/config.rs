@@ -226,9 +226,12 @@ pub struct TrainConfig {
     /// Per-frame pose corrections trained with the image losses (off by default; for captures
     /// with tracked motion, [`super::pose_refinement`]).
     pub pose_refinement: super::PoseRefinementConfig,
+    /// One outline offset per camera learned with the weights, for masks whose segmentation
+    /// grew or shrank every outline (off by default; [`super::outline_offset`]).
+    pub outline_offset: super::outline_offset::OutlineOffsetConfig,
     /// Several SkinNets from different seeds, their mean weights distilled into the exported
-    /// one ([`super::ensemble`]); one network by default. Not with pose refinement, whose
-    /// corrections belong to one run.
+    /// one ([`super::ensemble`]); one network by default. Not with pose refinement or outline
+    /// offsets, whose corrections belong to one run.
     pub ensemble: super::ensemble::EnsembleConfig,
     /// Pose locality ([`super::pose_locality`]): during the image iterations every training
     /// vertex sees its candidate joints' pose features from its own frame and every other
@@ -282,6 +285,7 @@ impl Default for TrainConfig {
             silhouette_huber_px: crate::losses::silhouette::DEFAULT_HUBER_PX,
             stages: Self::default_stages(),
             pose_refinement: super::PoseRefinementConfig::default(),
+            outline_offset: super::outline_offset::OutlineOffsetConfig::default(),
             ensemble: super::ensemble::EnsembleConfig::default(),
             pose_locality: true,
         }
@@ -432,6 +436,7 @@ impl TrainConfig {
             return Err("candidate_reach");
         }
         self.pose_refinement.validate()?;
+        self.outline_offset.validate()?;
         if self.validation_frames > 0 && self.validation_every == 0 {
             return Err("validation_every");
         }
@@ -468,7 +473,9 @@ impl TrainConfig {
         }
         self.stages.validate()?;
         self.ensemble.validate()?;
-        if self.ensemble.is_on() && self.pose_refinement.enabled {
+        // Pose corrections and outline offsets belong to one run: the distilled student would
+        // start its own from zero in stage 4.
+        if self.ensemble.is_on() && (self.pose_refinement.enabled || self.outline_offset.enabled) {
             return Err("ensemble.members");
         }
         Ok(())
@@ -565,7 +572,7 @@ mod tests {
     }
 
     #[test]
-    fn an_ensemble_has_one_to_max_members_and_no_pose_refinement() {
+    fn an_ensemble_has_one_to_max_members_and_no_pose_refinement_or_outline_offsets() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("c.json");
         let field = |text: &str| {
@@ -587,6 +594,7 @@ mod tests {
             r#"{"ensemble": {"members": 0}}"#.to_string(),
             format!(r#"{{"ensemble": {{"members": {}}}}}"#, max + 1),
             r#"{"ensemble": {"members": 2}, "pose_refinement": {"enabled": true}}"#.to_string(),
+            r#"{"ensemble": {"members": 2}, "outline_offset": {"enabled": true}}"#.to_string(),
         ] {
             assert_eq!(field(&bad), Err("ensemble.members"), "{bad}");
         }
@@ -596,5 +604,10 @@ mod tests {
         );
         // One network with pose refinement stays valid.
         assert_eq!(field(r#"{"pose_refinement": {"enabled": true}}"#), Ok(1));
+        assert_eq!(field(r#"{"outline_offset": {"enabled": true}}"#), Ok(1));
+        assert_eq!(
+            field(r#"{"outline_offset": {"enabled": true, "lr": 0}}"#),
+            Err("outline_offset.lr")
+        );
     }
 }

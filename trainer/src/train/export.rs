@@ -44,7 +44,36 @@ impl Trainer {
             .collect();
         let w = self.weights_for_poses(poses, frames.len(), None)?;
         let dense: Vec<f32> = w.flatten_all()?.to_vec1()?;
-        Ok(validation::score(&self.data, frames, &dense, &self.edges))
+        let offsets = self.outline_offsets()?;
+        Ok(validation::score(
+            &self.data,
+            frames,
+            &dense,
+            &self.edges,
+            offsets.as_deref(),
+        ))
+    }
+
+    /// The initial weights' validation score: as scored at the start, or with learned outline
+    /// offsets against the masks moved by the offsets learned so far, so that the guard
+    /// compares both against the same outlines.
+    fn initial_validation_now(&self) -> Result<validation::ValidationScore, TrainError> {
+        let Some(dense) = &self.initial_validation_weights else {
+            return Ok(self.initial_score);
+        };
+        let frames = if self.validation.is_empty() {
+            &self.data.frames
+        } else {
+            &self.validation
+        };
+        let offsets = self.outline_offsets()?;
+        Ok(validation::score(
+            &self.data,
+            frames,
+            dense,
+            &self.edges,
+            offsets.as_deref(),
+        ))
     }
 
     /// Scores the running parameter average (the current parameters without one), logs the
@@ -90,7 +119,8 @@ impl Trainer {
             .collect()
     }
 
-    /// The initial weights' validation score and the number of held-out frames.
+    /// The initial weights' validation score at the start (against the masks as they are) and
+    /// the number of held-out frames.
     #[must_use]
     pub fn initial_validation(&self) -> (validation::ValidationScore, usize) {
         (self.initial_score, self.validation.len())
@@ -111,8 +141,12 @@ impl Trainer {
 
     /// The validation report of the current parameters against the initial weights.
     pub fn validation_report(&self) -> Result<validation::ValidationReport, TrainError> {
+        let learned_offset_px = self
+            .outline_offsets()?
+            .map(|o| o.iter().map(|&b| f64::from(b)).sum::<f64>() / o.len().max(1) as f64);
         Ok(validation::ValidationReport {
-            initial: self.initial_score,
+            learned_offset_px,
+            initial: self.initial_validation_now()?,
             model: self.validate()?,
             held_out_frames: self.validation.len(),
         })

@@ -25,6 +25,7 @@ pub mod data;
 pub mod ensemble;
 mod error;
 mod export;
+pub mod outline_offset;
 pub mod plot;
 pub mod pose_locality;
 pub mod pose_refinement;
@@ -134,12 +135,17 @@ pub struct Trainer {
     validation: Vec<Frame>,
     /// The initial weights' validation score (before any candidate restriction).
     initial_score: validation::ValidationScore,
+    /// With learned outline offsets: the dense initial weights `initial_score` scored, kept to
+    /// score them again against the offsets learned.
+    initial_validation_weights: Option<Vec<f32>>,
     /// The best-scoring parameter average so far: `(score, image iteration, parameters)`.
     best: Option<(validation::ValidationScore, u64, NamedTensors)>,
     /// `(image iteration, score)` of every validation so far.
     validation_log: Vec<(u64, validation::ValidationScore)>,
     /// With [`PoseRefinementConfig::enabled`]: the training frames' pose corrections.
     pose_refinement: Option<pose_refinement::PoseRefinement>,
+    /// The learned outline offsets, when configured ([`outline_offset`]).
+    outline_offsets: Option<outline_offset::OutlineOffsets>,
     /// With [`Trainer::distil_from`]: the ensemble members whose mean weights the warm start
     /// regresses instead of the initial weights.
     teachers: Vec<TrainableSkinNet>,
@@ -224,7 +230,7 @@ impl Trainer {
         }
         let validation = validation::hold_out(&mut data, config.validation_frames);
         let edges = Arc::new(EdgeTable::new(v, &data.template.triangles));
-        let initial_score = {
+        let (initial_score, initial_validation_weights) = {
             let frames = if validation.is_empty() {
                 &data.frames
             } else {
@@ -233,7 +239,9 @@ impl Trainer {
             let dense: Vec<f32> = (0..frames.len())
                 .flat_map(|_| data.init_weights.iter().copied())
                 .collect();
-            validation::score(&data, frames, &dense, &edges)
+            let score = validation::score(&data, frames, &dense, &edges, None);
+            // Scored again against the learned offsets at the end (`validation_report`).
+            (score, config.outline_offset.enabled.then_some(dense))
         };
         let candidates =
             Candidates::new(&mut data, config.candidate_joints, config.candidate_reach);
@@ -251,6 +259,15 @@ impl Trainer {
                 data.skeleton.inverse_bind(),
                 diagonal,
                 config.pose_refinement,
+            )?)
+        } else {
+            None
+        };
+        let outline_offsets = if config.outline_offset.enabled {
+            let cameras = data.frames.first().map_or(0, |f| f.views.len());
+            Some(outline_offset::OutlineOffsets::new(
+                cameras,
+                config.outline_offset,
             )?)
         } else {
             None
@@ -373,9 +390,11 @@ impl Trainer {
             diagonal,
             validation,
             initial_score,
+            initial_validation_weights,
             best: None,
             validation_log: Vec::new(),
             pose_refinement,
+            outline_offsets,
             teachers: Vec::new(),
         })
     }
@@ -528,6 +547,15 @@ impl Trainer {
             })
             .collect();
         Ok(Some(poses))
+    }
+
+    /// With [`outline_offset::OutlineOffsetConfig::enabled`]: every camera's learned outline
+    /// offset so far (pixels; positive: the masks lie outside the mesh's outline).
+    pub fn outline_offsets(&self) -> Result<Option<Vec<f32>>, TrainError> {
+        Ok(match &self.outline_offsets {
+            Some(o) => Some(o.values()?),
+            None => None,
+        })
     }
 
     /// With [`PoseRefinementConfig::enabled`]: each training frame's pose correction so far

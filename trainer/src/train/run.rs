@@ -121,6 +121,7 @@ impl Trainer {
         csv.flush().map_err(io(&csv_path))?;
         self.save_checkpoint(&ckpt)?;
         self.write_profile(dir)?;
+        self.write_outline_offsets(dir)?;
         if let Some(corrections) = self.pose_corrections()? {
             let path = dir.join("pose_refinement.csv");
             let names = self.data.skeleton.names();
@@ -140,6 +141,20 @@ impl Trainer {
         }
         bar.finish();
         Ok(())
+    }
+
+    /// Writes `dir/outline_offsets.csv` (`camera,offset_px`) when the run learns outline offsets.
+    pub(super) fn write_outline_offsets(&self, dir: &Path) -> Result<(), TrainError> {
+        let Some(offsets) = self.outline_offsets()? else {
+            return Ok(());
+        };
+        let mut text = String::from("camera,offset_px\n");
+        for (c, b) in offsets.iter().enumerate() {
+            text += &format!("{c},{b:.4}\n");
+        }
+        let path = dir.join("outline_offsets.csv");
+        skinfield_formats::skf::write_atomic(&path, text.as_bytes())
+            .map_err(|source| TrainError::Io { path, source })
     }
 
     /// Writes `dir/profile.csv`: the milliseconds per iteration of every phase and kind of

@@ -124,13 +124,21 @@ impl Trainer {
                 })
             })
             .collect();
-        let silhouette = SilhouetteLoss::new(
+        // A frame's views are its capture's cameras in order.
+        let view_cameras: Vec<u32> = frames
+            .iter()
+            .flat_map(|&f| 0..self.data.frames[f].views.len() as u32)
+            .collect();
+        let loss = SilhouetteLoss::new(
             views,
             self.triangles.clone(),
             self.edges.clone(),
             self.config.silhouette_huber_px,
-        )
-        .apply(&posed)?;
+        );
+        let silhouette = match &self.outline_offsets {
+            Some(o) => loss.apply_with_offsets(&posed, &o.per_view(&view_cameras)?)?,
+            None => loss.apply(&posed)?,
+        };
         let sb = silhouette.get(0)?;
         let sc = silhouette.get(1)?;
         let (sb_px, sc_px) = (silhouette.get(2)?, silhouette.get(3)?);
@@ -195,6 +203,9 @@ impl Trainer {
             self.image_lr(self.done - 1) / Self::adam_config(&self.config, self.is_static()).lr;
         if let Some(r) = &mut self.pose_refinement {
             r.step(&frames, &grads, r.lr() * schedule)?;
+        }
+        if let Some(o) = &mut self.outline_offsets {
+            o.step(&grads, o.lr() * schedule)?;
         }
         if let Some(a) = &mut self.average {
             a.update()?;

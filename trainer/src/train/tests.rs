@@ -1477,3 +1477,103 @@ fn a_run_moved_onto_other_data_keeps_its_state() {
     let baseline = Trainer::new(data.clone(), config(), true).unwrap();
     assert!(matches!(baseline.with_data(data), Err(TrainError::Data(_))));
 }
+
+/// The tube scene whose masks' outlines are moved out by `offset_px` pixels (in when
+/// negative): a segmentation that grew or shrank every outline.
+fn scene_with_mask_margin(frames: usize, offset_px: f32) -> (TrainData, Vec<f32>) {
+    let (mut data, truth) = scene(frames);
+    for frame in &mut data.frames {
+        for view in &mut frame.views {
+            let cover =
+                crate::synth::mask_error::offset_coverage(&view.coverage, 64, 64, offset_px);
+            view.target = SilhouetteTarget::from_coverage(64, 64, &cover).unwrap();
+            view.coverage = cover.into();
+        }
+    }
+    (data, truth)
+}
+
+/// The static baseline started at the true weights and trained on `data`, with or without
+/// learned outline offsets: its weights' summed distance to `truth` and the offsets.
+fn static_run_from_truth(
+    mut data: TrainData,
+    truth: &[f32],
+    offsets: bool,
+) -> (f32, Option<Vec<f32>>) {
+    data.init_weights = truth.to_vec();
+    let cfg = TrainConfig {
+        iterations: 60,
+        batch: 4,
+        static_epsilon: 1e-2,
+        static_lr: 5e-2,
+        lr_warmup: 20,
+        weights: LossWeights {
+            laplacian: 0.0,
+            ..Default::default()
+        },
+        outline_offset: super::outline_offset::OutlineOffsetConfig {
+            enabled: offsets,
+            lr: 5e-2,
+        },
+        ..config()
+    };
+    let mut t = Trainer::new(data, cfg, true).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    t.run(dir.path(), false).unwrap();
+    let w = t.static_weights().unwrap().unwrap();
+    let err = w.iter().zip(truth).map(|(a, b)| (a - b).abs()).sum::<f32>();
+    let learned = t.outline_offsets().unwrap();
+    if let Some(o) = &learned {
+        let csv = std::fs::read_to_string(dir.path().join("outline_offsets.csv")).unwrap();
+        assert_eq!(csv, format!("camera,offset_px\n0,{:.4}\n", o[0]));
+        // The guard compares the initial weights with the model against the same outlines:
+        // the masks moved by the offsets learned, not the masks as they are.
+        let report = t.validation_report().unwrap();
+        let (at_start, _) = t.initial_validation();
+        let moved = t.validate().unwrap();
+        assert_eq!(report.model, moved);
+        let against_raw =
+            |score: &validation::ValidationScore| (score.iou, score.outline_offset_px);
+        assert_eq!(against_raw(&report.initial), against_raw(&at_start));
+        // The offsets explain the masks' margin: no warning about it.
+        assert_eq!(report.learned_offset_px, Some(f64::from(o[0])));
+        assert_eq!(report.mask_margin(), None, "{}", report.model);
+        if o[0].abs() > 0.3 {
+            assert!(
+                report.initial.silhouette_px < 0.7 * at_start.silhouette_px,
+                "{} vs {}",
+                report.initial,
+                at_start
+            );
+        }
+    }
+    (err, learned)
+}
+
+#[test]
+fn learned_outline_offsets_take_up_a_masks_margin_instead_of_the_weights() {
+    // Exact masks: the offset stays near zero.
+    let (data, truth) = scene(8);
+    let (exact, offsets) = static_run_from_truth(data, &truth, true);
+    let b = offsets.expect("offsets")[0];
+    assert!(b.abs() < 0.15, "learned offset on exact masks {b} px");
+    for margin in [0.7f32, -0.5] {
+        let (data, truth) = scene_with_mask_margin(8, margin);
+        let (plain, none) = static_run_from_truth(data.clone(), &truth, false);
+        assert_eq!(none, None);
+        let (learned, offsets) = static_run_from_truth(data, &truth, true);
+        let b = offsets.expect("offsets")[0];
+        assert!(
+            (b - margin).abs() < 0.15,
+            "masks moved by {margin} px: offset {b} px"
+        );
+        // Without offsets the weights bend to meet the margin (2.3 times as far from the
+        // truth as on exact masks); with them they stay closer to where exact masks leave them
+        // than to that.
+        assert!(
+            learned - exact < 0.5 * (plain - exact),
+            "weights moved from the truth by {learned} with offsets, {plain} without, {exact} \
+             on exact masks"
+        );
+    }
+}

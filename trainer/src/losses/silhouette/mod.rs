@@ -27,6 +27,13 @@
 //!   views the optimum is the outline itself rather than wherever unit pulls balance; beyond `δ`
 //!   it is the paper's L1 (robust to gross mismatches such as an occluded limb).
 //!
+//! - **An optional outline offset `b_c` per view** (pixels; [`view_terms_with_offset`]): the
+//!   boundary term takes the vertex's signed distance `s` (positive outside the mask) and
+//!   penalises `ρ(|s + b|)`, the contour term moves each outline point by `−b` along its
+//!   outward normal, so masks grown by `b` are met exactly by the true outline. Learned per
+//!   camera when configured ([`crate::train::outline_offset`]); zero is the plain loss, bit for
+//!   bit.
+//!
 //! The selections (`B_c`, each `o_c(p)`'s edge and parameter `t`) are constants of a step, as in
 //! the paper. [`SilhouetteLoss`] evaluates a whole batch as one candle op: views in parallel, the
 //! gradient with respect to the posed vertices in closed form (the projection's Jacobian,
@@ -37,7 +44,7 @@ pub mod outline;
 
 use std::sync::{Arc, Mutex};
 
-use candle_core::{CpuStorage, CustomOp1, Layout, Result, Shape, Tensor, bail};
+use candle_core::{CpuStorage, CustomOp2, Layout, Result, Shape, Tensor, bail};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use skinfield_formats::Camera;
@@ -61,6 +68,9 @@ pub struct SilhouetteTarget {
     pub contour: Arc<[Vec2]>,
     /// Their weights (segment lengths, pixels).
     pub contour_weights: Arc<[f32]>,
+    /// Their outward unit normals (out of the mask): the direction in which an outline offset
+    /// moves them.
+    pub contour_normals: Arc<[Vec2]>,
 }
 
 impl SilhouetteTarget {
@@ -71,11 +81,12 @@ impl SilhouetteTarget {
         coverage: &[f32],
     ) -> std::result::Result<Self, OutlineError> {
         let outline = Outline::from_coverage(width, height, coverage)?;
-        let (points, weights) = outline.contour_points();
+        let (points, weights, normals) = outline.contour_points_with_normals();
         Ok(Self {
             outline: Arc::new(outline),
             contour: points.into(),
             contour_weights: weights.into(),
+            contour_normals: normals.into(),
         })
     }
 
@@ -259,6 +270,10 @@ pub struct ViewTerms {
     pub contour_grad: Vec<(u32, Vec3)>,
     /// The boundary vertices `B` (sorted).
     pub boundary_vertices: Vec<u32>,
+    /// `∂boundary/∂b`, the boundary sum's derivative with respect to the view's outline offset.
+    pub boundary_offset_grad: f64,
+    /// `∂contour/∂b`.
+    pub contour_offset_grad: f64,
 }
 
 /// Eq. 10 for one view of the posed mesh `positions` (triangles `triangles`, edge table
@@ -271,6 +286,28 @@ pub fn view_terms(
     triangles: &[[u32; 3]],
     table: &EdgeTable,
     delta: f32,
+) -> ViewTerms {
+    view_terms_with_offset(camera, target, positions, triangles, table, delta, 0.0)
+}
+
+/// [`view_terms`] against the mask's outline taken `offset` pixels outside the mesh's: the
+/// terms measure the mesh's outline against the mask's outline moved inwards by `offset`
+/// (negative: outwards), so that masks whose segmentation grew every outline by `b` pixels are
+/// explained exactly by the true mesh at `offset = b` (see [`crate::train::outline_offset`]).
+/// At `offset = 0` this is [`view_terms`], bit for bit.
+///
+/// The boundary term takes the vertex's *signed* distance `s` to the mask outline (positive
+/// outside) and penalises `ρ(|s + b|)`; the contour term moves each outline point `p` to
+/// `p − b·m` along its outward normal `m` before matching it to the mesh's outline.
+#[must_use]
+pub fn view_terms_with_offset(
+    camera: &Camera,
+    target: &SilhouetteTarget,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    table: &EdgeTable,
+    delta: f32,
+    offset: f32,
 ) -> ViewTerms {
     let view = ViewGeometry::new(camera, positions);
     let MeshOutline {
@@ -290,12 +327,16 @@ pub fn view_terms(
         (i, j[0] * g.x + j[1] * g.y)
     };
     for &i in &verts {
-        let (d, n) = target.outline.distance(view.uv[i as usize]);
-        let (rho, drho) = huber(d, delta);
+        let (s, outward) = target.outline.signed_distance(view.uv[i as usize]);
+        let r = s + offset;
+        let (rho, drho) = huber(r.abs(), delta);
         out.boundary += f64::from(rho);
-        out.boundary_distance += f64::from(d);
+        out.boundary_distance += f64::from(r.abs());
         if drho != 0.0 {
-            out.boundary_grad.push(pull(i, n * drho));
+            // ∂ρ(|r|)/∂r = ρ'·sign(r); ∂r/∂uv = the outward normal, ∂r/∂b = 1.
+            let g = drho * r.signum();
+            out.boundary_grad.push(pull(i, outward * g));
+            out.boundary_offset_grad += f64::from(g);
         }
     }
     out.boundary_count = verts.len();
@@ -308,7 +349,13 @@ pub fn view_terms(
         })
         .collect();
     let grid = SegmentGrid::new(&segments);
-    for (&p, &wp) in target.contour.iter().zip(target.contour_weights.iter()) {
+    let points = target
+        .contour
+        .iter()
+        .zip(target.contour_weights.iter())
+        .zip(target.contour_normals.iter());
+    for ((&p, &wp), &m) in points {
+        let p = p - m * offset;
         let Some((k, t, d2)) = grid.nearest(&segments, p) else {
             continue;
         };
@@ -323,6 +370,8 @@ pub fn view_terms(
             let [a, b] = table.edges[edges[k as usize] as usize];
             out.contour_grad.push(pull(a, g * (1.0 - t)));
             out.contour_grad.push(pull(b, g * t));
+            // ∂r/∂b = (p − q)·(−m)/r, since p moves by −m per unit of offset.
+            out.contour_offset_grad += f64::from(g.dot(m));
         }
     }
     out
@@ -342,13 +391,21 @@ pub struct BatchView {
 /// The silhouette loss of a batch of posed meshes `[B, V, 3]` as one candle op. Its output is
 /// `[4]`: the boundary and contour terms (each the mean over views of a view's normalised sum:
 /// `Σρ/|B|` and `Σwρ/W`, differentiable) and, for logging, the mean boundary-vertex and contour
-/// distances in pixels (no gradient).
+/// distances in pixels (no gradient). Its second input holds each view's outline offset
+/// ([`view_terms_with_offset`]; zeros for the plain loss), and is differentiable too.
 pub struct SilhouetteLoss {
     views: Vec<BatchView>,
     triangles: Arc<[[u32; 3]]>,
     table: Arc<EdgeTable>,
     delta: f32,
-    grads: Mutex<Option<[Vec<f32>; 2]>>,
+    grads: Mutex<Option<Gradients>>,
+}
+
+/// The gradients a forward pass leaves for the backward one: each term's with respect to the
+/// posed positions and to every view's offset.
+struct Gradients {
+    positions: [Vec<f32>; 2],
+    offsets: [Vec<f32>; 2],
 }
 
 impl SilhouetteLoss {
@@ -369,18 +426,33 @@ impl SilhouetteLoss {
         }
     }
 
-    /// Applies the loss to posed positions `[B, V, 3]` (f32).
+    /// Applies the loss to posed positions `[B, V, 3]` (f32) against the masks' own outlines.
     pub fn apply(self, posed: &Tensor) -> Result<Tensor> {
-        posed.contiguous()?.apply_op1(self)
+        let offsets = Tensor::zeros(self.views.len(), candle_core::DType::F32, posed.device())?;
+        self.apply_with_offsets(posed, &offsets)
+    }
+
+    /// Applies the loss to posed positions `[B, V, 3]` (f32) with each view's outline offset
+    /// `offsets` (`[views]`, pixels, f32).
+    pub fn apply_with_offsets(self, posed: &Tensor, offsets: &Tensor) -> Result<Tensor> {
+        posed.contiguous()?.apply_op2(
+            &offsets.to_dtype(candle_core::DType::F32)?.contiguous()?,
+            self,
+        )
     }
 }
-
-impl CustomOp1 for SilhouetteLoss {
+impl CustomOp2 for SilhouetteLoss {
     fn name(&self) -> &'static str {
         "silhouette"
     }
 
-    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> Result<(CpuStorage, Shape)> {
+    fn cpu_fwd(
+        &self,
+        storage: &CpuStorage,
+        layout: &Layout,
+        offset_storage: &CpuStorage,
+        offset_layout: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
         let CpuStorage::F32(data) = storage else {
             bail!("silhouette: posed positions must be f32")
         };
@@ -392,6 +464,20 @@ impl CustomOp1 for SilhouetteLoss {
             bail!(
                 "silhouette: posed positions are {:?}, expected [B, V, 3]",
                 layout.shape()
+            );
+        }
+        let CpuStorage::F32(offsets) = offset_storage else {
+            bail!("silhouette: outline offsets must be f32")
+        };
+        let Some((oa, ob)) = offset_layout.contiguous_offsets() else {
+            bail!("silhouette: outline offsets must be contiguous")
+        };
+        let offsets = &offsets[oa..ob];
+        if offsets.len() != self.views.len() {
+            bail!(
+                "silhouette: {} outline offsets for {} views",
+                offsets.len(),
+                self.views.len()
             );
         }
         let data = &data[a..b];
@@ -409,30 +495,34 @@ impl CustomOp1 for SilhouetteLoss {
         let terms: Vec<ViewTerms> = self
             .views
             .par_iter()
-            .map(|view| {
-                view_terms(
+            .zip(offsets.par_iter())
+            .map(|(view, &offset)| {
+                view_terms_with_offset(
                     &view.camera,
                     &view.target,
                     &positions[view.frame],
                     &self.triangles,
                     &self.table,
                     self.delta,
+                    offset,
                 )
             })
             .collect();
         let n = self.views.len().max(1) as f64;
         let mut values = [0.0f64; 4];
         let mut grads = [vec![0.0f32; frames * v * 3], vec![0.0f32; frames * v * 3]];
-        for (view, t) in self.views.iter().zip(&terms) {
+        let mut offset_grads = [vec![0.0f32; offsets.len()], vec![0.0f32; offsets.len()]];
+        for (k, (view, t)) in self.views.iter().zip(&terms).enumerate() {
             let base = view.frame * v * 3;
             if t.boundary_count > 0 {
                 let s = 1.0 / (t.boundary_count as f64 * n);
                 values[0] += t.boundary * s;
                 values[2] += t.boundary_distance * s;
+                offset_grads[0][k] = (t.boundary_offset_grad * s) as f32;
                 for &(i, g) in &t.boundary_grad {
                     let at = base + 3 * i as usize;
-                    for k in 0..3 {
-                        grads[0][at + k] += (f64::from(g[k]) * s) as f32;
+                    for c in 0..3 {
+                        grads[0][at + c] += (f64::from(g[c]) * s) as f32;
                     }
                 }
             }
@@ -440,10 +530,11 @@ impl CustomOp1 for SilhouetteLoss {
                 let s = 1.0 / (t.contour_weight * n);
                 values[1] += t.contour * s;
                 values[3] += t.contour_distance * s;
+                offset_grads[1][k] = (t.contour_offset_grad * s) as f32;
                 for &(i, g) in &t.contour_grad {
                     let at = base + 3 * i as usize;
-                    for k in 0..3 {
-                        grads[1][at + k] += (f64::from(g[k]) * s) as f32;
+                    for c in 0..3 {
+                        grads[1][at + c] += (f64::from(g[c]) * s) as f32;
                     }
                 }
             }
@@ -451,14 +542,23 @@ impl CustomOp1 for SilhouetteLoss {
         *self
             .grads
             .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(grads);
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(Gradients {
+            positions: grads,
+            offsets: offset_grads,
+        });
         Ok((
             CpuStorage::F32(values.iter().map(|&x| x as f32).collect()),
             Shape::from(4),
         ))
     }
 
-    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> Result<Option<Tensor>> {
+    fn bwd(
+        &self,
+        arg: &Tensor,
+        offsets: &Tensor,
+        _res: &Tensor,
+        grad_res: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>)> {
         let g = grad_res
             .to_dtype(candle_core::DType::F32)?
             .to_vec1::<f32>()?;
@@ -466,15 +566,28 @@ impl CustomOp1 for SilhouetteLoss {
             .grads
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let Some([gb, gc]) = guard.as_ref() else {
+        let Some(Gradients {
+            positions: [gb, gc],
+            offsets: [ob, oc],
+        }) = guard.as_ref()
+        else {
             bail!("silhouette: backward before forward");
         };
-        let combined: Vec<f32> = gb
-            .iter()
-            .zip(gc)
-            .map(|(b, c)| g[0] * b + g[1] * c)
-            .collect();
-        Ok(Some(Tensor::from_vec(combined, arg.shape(), arg.device())?))
+        let combine = |b: &[f32], c: &[f32]| -> Vec<f32> {
+            b.iter().zip(c).map(|(b, c)| g[0] * b + g[1] * c).collect()
+        };
+        Ok((
+            Some(Tensor::from_vec(
+                combine(gb, gc),
+                arg.shape(),
+                arg.device(),
+            )?),
+            Some(Tensor::from_vec(
+                combine(ob, oc),
+                offsets.shape(),
+                offsets.device(),
+            )?),
+        ))
     }
 }
 

@@ -64,6 +64,8 @@ pub struct Outline {
     /// Per segment, the segments that share its first and its second end ([`NONE`] at an open
     /// end), so a query can walk along the outline.
     links: Vec<[u32; 2]>,
+    /// Per segment, its unit normal pointing out of the mask (towards lower coverage).
+    outward: Vec<Vec2>,
 }
 
 /// The closest point to `p` on segment `s`, and its parameter along `s`.
@@ -106,12 +108,17 @@ impl Outline {
             return Err(OutlineError::Empty);
         }
         let links = link(&segments);
+        let outward = segments
+            .iter()
+            .map(|&s| outward_normal(width, height, coverage, s))
+            .collect();
         let mut outline = Self {
             width,
             height,
             segments,
             nearest: Vec::new(),
             links,
+            outward,
         };
         outline.nearest = outline.cached_nearest_segments();
         Ok(outline)
@@ -162,6 +169,35 @@ impl Outline {
     /// the image use the candidates of the nearest border pixels.
     #[must_use]
     pub fn distance(&self, p: Vec2) -> (f32, Vec2) {
+        let (d, q, _) = self.nearest_point(p);
+        (d, if d > 0.0 { (p - q) / d } else { Vec2::ZERO })
+    }
+
+    /// The signed distance from image point `p` to the outline (pixels; positive outside the
+    /// mask, negative inside) and its gradient, the outward unit normal there (zero on the
+    /// outline). The side is that of the nearest segment's outward normal.
+    #[must_use]
+    pub fn signed_distance(&self, p: Vec2) -> (f32, Vec2) {
+        let (d, q, segment) = self.nearest_point(p);
+        if d <= 0.0 {
+            return (0.0, Vec2::ZERO);
+        }
+        let n = (p - q) / d;
+        if n.dot(self.outward[segment as usize]) < 0.0 {
+            (-d, -n)
+        } else {
+            (d, n)
+        }
+    }
+
+    /// The unit normal of segment `segment` that points out of the mask.
+    #[must_use]
+    pub fn outward_normal(&self, segment: usize) -> Vec2 {
+        self.outward[segment]
+    }
+
+    /// The distance from `p` to the outline, the nearest outline point and its segment.
+    fn nearest_point(&self, p: Vec2) -> (f32, Vec2, u32) {
         let fx = (p.x - 0.5).floor();
         let fy = (p.y - 0.5).floor();
         let clamp = |v: f32, n: usize| (v.max(0.0) as usize).min(n - 1);
@@ -169,7 +205,7 @@ impl Outline {
             let q = closest_on_segment(self.segments[s as usize], p).0;
             ((p - q).length(), q)
         };
-        let mut best = (f32::INFINITY, p);
+        let mut best = (f32::INFINITY, p, 0u32);
         // The segments recorded at the four surrounding centres, then a descent along the
         // outline from each: a point's nearest segment need not be any centre's (inside a bend,
         // neighbouring centres map to outline points more than a segment apart).
@@ -182,7 +218,7 @@ impl Outline {
             }
             let (d0, q0) = dist(start);
             if d0 < best.0 {
-                best = (d0, q0);
+                best = (d0, q0, start);
             }
             for end in 0..2 {
                 let (mut prev, mut cur, mut here) = (start, self.links[start as usize][end], d0);
@@ -196,7 +232,7 @@ impl Outline {
                     }
                     here = d;
                     if d < best.0 {
-                        best = (d, q);
+                        best = (d, q, cur);
                     }
                     let l = self.links[cur as usize];
                     let next = if l[0] == prev { l[1] } else { l[0] };
@@ -204,19 +240,30 @@ impl Outline {
                 }
             }
         }
-        let (d, q) = best;
-        (d, if d > 0.0 { (p - q) / d } else { Vec2::ZERO })
+        best
     }
 
     /// Points along the outline for the contour term: each segment's midpoint with its length
     /// as weight (so the term integrates along the outline, whatever the segments' lengths).
     #[must_use]
     pub fn contour_points(&self) -> (Vec<Vec2>, Vec<f32>) {
-        self.segments
-            .iter()
-            .map(|s| ((s[0] + s[1]) * 0.5, (s[1] - s[0]).length()))
-            .filter(|&(_, l)| l > 0.0)
-            .unzip()
+        let (points, weights, _) = self.contour_points_with_normals();
+        (points, weights)
+    }
+
+    /// [`Outline::contour_points`] with each point's outward normal.
+    #[must_use]
+    pub fn contour_points_with_normals(&self) -> (Vec<Vec2>, Vec<f32>, Vec<Vec2>) {
+        let mut out = (Vec::new(), Vec::new(), Vec::new());
+        for (s, &n) in self.segments.iter().zip(&self.outward) {
+            let length = (s[1] - s[0]).length();
+            if length > 0.0 {
+                out.0.push((s[0] + s[1]) * 0.5);
+                out.1.push(length);
+                out.2.push(n);
+            }
+        }
+        out
     }
 }
 
@@ -343,6 +390,46 @@ impl<const CACHED: bool> NearestField<'_, CACHED> {
 
 /// For each segment, the other segment sharing each of its ends. Marching squares computes a
 /// crossing on a cell edge identically from both cells, so shared ends are bit-identical.
+/// The unit normal of segment `s` that points towards lower coverage: the coverage's bilinear
+/// interpolant (outside the image 0, as [`march`] takes it) compared a tenth of a pixel to
+/// either side of the segment's midpoint. A zero-length segment (the outline passing through a
+/// pixel centre of exactly 50 %) takes the direction in which the interpolant falls fastest.
+fn outward_normal(width: usize, height: usize, coverage: &[f32], s: [Vec2; 2]) -> Vec2 {
+    let at = |x: i64, y: i64| -> f32 {
+        if x < 0 || y < 0 || x >= width as i64 || y >= height as i64 {
+            0.0
+        } else {
+            coverage[y as usize * width + x as usize]
+        }
+    };
+    let sample = |p: Vec2| -> f32 {
+        let (u, v) = (p.x - 0.5, p.y - 0.5);
+        let (x0, y0) = (u.floor(), v.floor());
+        let (fx, fy) = (u - x0, v - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx;
+        let bottom = at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    };
+    let mid = (s[0] + s[1]) * 0.5;
+    let d = s[1] - s[0];
+    let length = d.length();
+    if length <= 0.0 {
+        let h = 0.1;
+        let fall = Vec2::new(
+            sample(mid - Vec2::X * h) - sample(mid + Vec2::X * h),
+            sample(mid - Vec2::Y * h) - sample(mid + Vec2::Y * h),
+        );
+        return fall.try_normalize().unwrap_or(Vec2::X);
+    }
+    let n = Vec2::new(d.y, -d.x) / length;
+    if sample(mid + n * 0.1) <= sample(mid - n * 0.1) {
+        n
+    } else {
+        -n
+    }
+}
+
 fn link(segments: &[[Vec2; 2]]) -> Vec<[u32; 2]> {
     let key = |p: Vec2| (p.x.to_bits(), p.y.to_bits());
     let mut ends: Vec<((u32, u32), u32, usize)> = segments
@@ -522,6 +609,43 @@ mod tests {
         let mean_b = errs.iter().sum::<f32>() / errs.len() as f32;
         assert!(mean_b.abs() < 0.15, "binary mean radial error {mean_b} px");
         assert!(errs.iter().all(|e| e.abs() < 0.75));
+    }
+
+    #[test]
+    fn signed_distances_are_negative_inside_a_ring_and_positive_outside() {
+        // A ring: a disc with a hole, so the inner outline's outward normals point at the
+        // centre and the outer one's away from it.
+        let centre = Vec2::new(30.3, 27.8);
+        let outer = disc(64, 60, centre, 22.0, 4);
+        let inner = disc(64, 60, centre, 9.0, 4);
+        let cov: Vec<f32> = outer.iter().zip(&inner).map(|(a, b)| a - b).collect();
+        let o = Outline::from_coverage(64, 60, &cov).unwrap();
+        for (k, s) in o.segments.iter().enumerate() {
+            let mid = (s[0] + s[1]) * 0.5;
+            let away = (mid - centre).normalize();
+            let n = o.outward_normal(k);
+            let on_outer = (mid - centre).length() > 15.0;
+            let expected = if on_outer { away } else { -away };
+            assert!(n.dot(expected) > 0.8, "segment {k} at {mid}: {n}");
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for _ in 0..2000 {
+            let p = Vec2::new(rng.random_range(2.0..62.0), rng.random_range(2.0..58.0));
+            let r = (p - centre).length();
+            let (s, g) = o.signed_distance(p);
+            let (d, n) = o.distance(p);
+            assert!((s.abs() - d).abs() < 1e-6, "{p}: {s} vs {d}");
+            // Away from the outlines (0.3 px: the 4 × 4 coverage's noise) the sign is the
+            // side; the gradient is the unsigned one turned outwards.
+            if (r - 22.0).abs() > 0.3 && (r - 9.0).abs() > 0.3 {
+                let inside = r < 22.0 && r > 9.0;
+                assert_eq!(s < 0.0, inside, "{p} (radius {r}): {s}");
+            }
+            assert!(g == n || g == -n, "{p}: {g} vs {n}");
+            if s != 0.0 {
+                assert!((g * s.signum()).dot(n) > 0.99);
+            }
+        }
     }
 
     #[test]

@@ -341,3 +341,117 @@ fn cell_lists_equal_brute_force() {
         }
     }
 }
+
+/// The loss of a sphere of radius 0.5 against the coverage of a sphere grown by `grow_px`
+/// pixels at the silhouette (shrunk when negative), for each outline offset of `offsets`.
+fn offset_sweep(grow_px: f32, offsets: &[f32]) -> Vec<f64> {
+    let cam = camera(128);
+    let px = cam.center().length() / cam.fx;
+    let (p, t) = uv_sphere(40, 64, 0.5, Vec3::ZERO);
+    let table = EdgeTable::new(p.len(), &t);
+    let (q, tq) = uv_sphere(40, 64, 0.5 + grow_px * px, Vec3::ZERO);
+    let cov = crate::raster::coverage(&cam, &q, &tq, 4);
+    let target = SilhouetteTarget::from_coverage(128, 128, &cov).unwrap();
+    offsets
+        .iter()
+        .map(|&b| {
+            let v = view_terms_with_offset(&cam, &target, &p, &t, &table, DEFAULT_HUBER_PX, b);
+            v.boundary / v.boundary_count.max(1) as f64 + v.contour / v.contour_weight.max(1e-12)
+        })
+        .collect()
+}
+
+#[test]
+fn a_mask_grown_by_a_margin_is_explained_at_that_outline_offset() {
+    let offsets: Vec<f32> = (-16..=16).map(|k| k as f32 * 0.125).collect();
+    for grow in [0.0f32, 1.0, -0.75] {
+        let losses = offset_sweep(grow, &offsets);
+        let best = (0..losses.len())
+            .min_by(|&a, &b| losses[a].total_cmp(&losses[b]))
+            .unwrap();
+        assert!(best > 0 && best + 1 < losses.len(), "{grow}: {losses:?}");
+        let (l0, l1, l2) = (losses[best - 1], losses[best], losses[best + 1]);
+        let vertex = offsets[best] + 0.125 * (0.5 * (l0 - l2) / (l0 - 2.0 * l1 + l2)) as f32;
+        assert!(
+            (vertex - grow).abs() < 0.1,
+            "masks grown by {grow} px: the loss is smallest at offset {vertex:.3} px"
+        );
+    }
+    // At offset 0 the loss is the plain one, bit for bit.
+    let cam = camera(96);
+    let (p, t) = uv_sphere(16, 24, 0.5, Vec3::ZERO);
+    let (q, tq) = uv_sphere(16, 24, 0.55, Vec3::new(0.03, 0.0, 0.0));
+    let cov = crate::raster::coverage(&cam, &q, &tq, 4);
+    let target = SilhouetteTarget::from_coverage(96, 96, &cov).unwrap();
+    let table = EdgeTable::new(p.len(), &t);
+    let plain = view_terms(&cam, &target, &p, &t, &table, DEFAULT_HUBER_PX);
+    let zero = view_terms_with_offset(&cam, &target, &p, &t, &table, DEFAULT_HUBER_PX, 0.0);
+    assert_eq!(plain, zero);
+}
+
+#[test]
+fn the_batch_op_offset_gradient_matches_finite_differences() {
+    let cam = camera(96);
+    let (p, t) = uv_sphere(16, 24, 0.5, Vec3::ZERO);
+    let (q, tq) = uv_sphere(16, 24, 0.56, Vec3::new(0.04, -0.02, 0.0));
+    let cov = crate::raster::coverage(&cam, &q, &tq, 4);
+    let target = SilhouetteTarget::from_coverage(96, 96, &cov).unwrap();
+    let table = Arc::new(EdgeTable::new(p.len(), &t));
+    let tri: Arc<[[u32; 3]]> = t.clone().into();
+    // Two frames, the second the sphere moved; three views with their own offsets.
+    let moved: Vec<Vec3> = p.iter().map(|&x| x + Vec3::new(0.03, 0.02, 0.0)).collect();
+    let flat: Vec<f32> = p.iter().chain(&moved).flat_map(|x| x.to_array()).collect();
+    let posed = Tensor::from_vec(flat, (2, p.len(), 3), &Device::Cpu).unwrap();
+    let views: Vec<BatchView> = [0, 1, 1]
+        .iter()
+        .map(|&frame| BatchView {
+            frame,
+            camera: cam.clone(),
+            target: target.clone(),
+        })
+        .collect();
+    let weights = Tensor::new(&[1.0f32, 2.0, 0.0, 0.0], &Device::Cpu).unwrap();
+    let value = |b: &[f32]| -> f64 {
+        let offsets = Tensor::new(b, &Device::Cpu).unwrap();
+        let out = SilhouetteLoss::new(views.clone(), tri.clone(), table.clone(), DEFAULT_HUBER_PX)
+            .apply_with_offsets(&posed, &offsets)
+            .unwrap();
+        f64::from(
+            (out * &weights)
+                .unwrap()
+                .sum_all()
+                .unwrap()
+                .to_vec0::<f32>()
+                .unwrap(),
+        )
+    };
+    let at = [0.3f32, -0.4, 0.8];
+    let offsets = Var::new(&at, &Device::Cpu).unwrap();
+    let out = SilhouetteLoss::new(views.clone(), tri.clone(), table.clone(), DEFAULT_HUBER_PX)
+        .apply_with_offsets(&posed, offsets.as_tensor())
+        .unwrap();
+    let grads = (out * &weights)
+        .unwrap()
+        .sum_all()
+        .unwrap()
+        .backward()
+        .unwrap();
+    let g = grads
+        .get(offsets.as_tensor())
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
+    for k in 0..3 {
+        let h = 1e-2f32;
+        let (mut a, mut b) = (at, at);
+        a[k] += h;
+        b[k] -= h;
+        let fd = (value(&a) - value(&b)) / (2.0 * f64::from(h));
+        assert!(
+            (f64::from(g[k]) - fd).abs() <= 2e-2 * fd.abs() + 1e-3,
+            "view {k}: {} vs {fd}",
+            g[k]
+        );
+        assert!(fd.abs() > 1e-2, "view {k}: the offset must matter ({fd})");
+    }
+}

@@ -553,6 +553,7 @@ impl Trainer {
         }
         csv.flush().map_err(io)?;
         self.write_profile(dir)?;
+        self.write_outline_offsets(dir)?;
         Ok(appearance)
     }
 }
