@@ -388,8 +388,6 @@ impl<const CACHED: bool> NearestField<'_, CACHED> {
     }
 }
 
-/// For each segment, the other segment sharing each of its ends. Marching squares computes a
-/// crossing on a cell edge identically from both cells, so shared ends are bit-identical.
 /// The unit normal of segment `s` that points towards lower coverage: the coverage's bilinear
 /// interpolant (outside the image 0, as [`march`] takes it) compared a tenth of a pixel to
 /// either side of the segment's midpoint. A zero-length segment (the outline passing through a
@@ -430,6 +428,8 @@ fn outward_normal(width: usize, height: usize, coverage: &[f32], s: [Vec2; 2]) -
     }
 }
 
+/// For each segment, the other segment sharing each of its ends. Marching squares computes a
+/// crossing on a cell edge identically from both cells, so shared ends are bit-identical.
 fn link(segments: &[[Vec2; 2]]) -> Vec<[u32; 2]> {
     let key = |p: Vec2| (p.x.to_bits(), p.y.to_bits());
     let mut ends: Vec<((u32, u32), u32, usize)> = segments
