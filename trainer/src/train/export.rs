@@ -33,43 +33,44 @@ impl Trainer {
     /// Scores the current parameters on the validation frames (the training frames when none
     /// are held out).
     pub fn validate(&self) -> Result<validation::ValidationScore, TrainError> {
-        let frames = if self.validation.is_empty() {
-            &self.data.frames
-        } else {
-            &self.validation
-        };
+        let frames = self.validation_frames();
         let poses: Vec<f32> = frames
             .iter()
             .flat_map(|f| f.pose_features.iter().copied())
             .collect();
         let w = self.weights_for_poses(poses, frames.len(), None)?;
-        let dense: Vec<f32> = w.flatten_all()?.to_vec1()?;
-        let offsets = self.outline_offsets()?;
-        Ok(validation::score(
-            &self.data,
-            frames,
-            &dense,
-            &self.edges,
-            offsets.as_deref(),
-        ))
+        self.score_on_validation_frames(&w.flatten_all()?.to_vec1()?)
     }
 
     /// The initial weights' validation score: as scored at the start, or with learned outline
     /// offsets against the masks moved by the offsets learned so far, so that the guard
     /// compares both against the same outlines.
     fn initial_validation_now(&self) -> Result<validation::ValidationScore, TrainError> {
-        let Some(dense) = &self.initial_validation_weights else {
-            return Ok(self.initial_score);
-        };
-        let frames = if self.validation.is_empty() {
+        match &self.initial_validation_weights {
+            Some(dense) => self.score_on_validation_frames(dense),
+            None => Ok(self.initial_score),
+        }
+    }
+
+    /// The frames validation scores: the held-out ones, or the training frames when none are.
+    fn validation_frames(&self) -> &[Frame] {
+        if self.validation.is_empty() {
             &self.data.frames
         } else {
             &self.validation
-        };
+        }
+    }
+
+    /// Scores dense weights (one `[V][J]` set per [`Trainer::validation_frames`] frame) against
+    /// the masks moved by the outline offsets learned so far, if any.
+    fn score_on_validation_frames(
+        &self,
+        dense: &[f32],
+    ) -> Result<validation::ValidationScore, TrainError> {
         let offsets = self.outline_offsets()?;
         Ok(validation::score(
             &self.data,
-            frames,
+            self.validation_frames(),
             dense,
             &self.edges,
             offsets.as_deref(),

@@ -124,11 +124,6 @@ impl Trainer {
                 })
             })
             .collect();
-        // A frame's views are its capture's cameras in order.
-        let view_cameras: Vec<u32> = frames
-            .iter()
-            .flat_map(|&f| 0..self.data.frames[f].views.len() as u32)
-            .collect();
         let loss = SilhouetteLoss::new(
             views,
             self.triangles.clone(),
@@ -136,7 +131,14 @@ impl Trainer {
             self.config.silhouette_huber_px,
         );
         let silhouette = match &self.outline_offsets {
-            Some(o) => loss.apply_with_offsets(&posed, &o.per_view(&view_cameras)?)?,
+            Some(o) => {
+                // A frame's views are its capture's cameras in order.
+                let cameras: Vec<u32> = frames
+                    .iter()
+                    .flat_map(|&f| 0..self.data.frames[f].views.len() as u32)
+                    .collect();
+                loss.apply_with_offsets(&posed, &o.per_view(&cameras)?)?
+            }
             None => loss.apply(&posed)?,
         };
         let sb = silhouette.get(0)?;
