@@ -185,6 +185,15 @@ impl Trainer {
         terms.extend(self.rendering_term(&frames, &posed)?);
         timer.lap(&mut self.profile, kind, Phase::Rendering);
         let total = Tensor::stack(&terms, 0)?.sum_all()?;
+        // The offsets' objective, the silhouette distances, carries no gradient to the weights
+        // (`SilhouetteLoss`); the logged total leaves it out.
+        let objective = match &self.outline_offsets {
+            Some(_) => {
+                (((&sb_px * lw.silhouette_boundary)? + (&sc_px * lw.silhouette_contour)?)?
+                    + &total)?
+            }
+            None => total.clone(),
+        };
         let val = |t: &Tensor| -> Result<f64, TrainError> { Ok(f64::from(t.to_vec0::<f32>()?)) };
         self.done += 1;
         let record = LossRecord {
@@ -197,7 +206,7 @@ impl Trainer {
             partwise: val(&part)?,
             prior: val(&prior)? + init_entropy,
         };
-        let grads = total.backward()?;
+        let grads = objective.backward()?;
         timer.lap(&mut self.profile, kind, Phase::Backward);
         self.optimiser.step(&grads)?;
         // The corrections follow the image iterations' schedule (warm-up, cosine decay).

@@ -32,7 +32,9 @@
 //!   penalises `ρ(|s + b|)`, the contour term moves each outline point by `−b` along its
 //!   outward normal, so masks grown by `b` are met exactly by the true outline. Learned per
 //!   camera when configured ([`crate::train::outline_offset`]); zero is the plain loss, bit for
-//!   bit.
+//!   bit. The weights fit the Huber terms; the offsets fit the plain distances (L1), whose
+//!   minimum over a uniform shift is the *median* margin rather than the mean, so a model that
+//!   is thinner than the masks on part of its outline (LBS at bent joints) does not move them.
 //!
 //! The selections (`B_c`, each `o_c(p)`'s edge and parameter `t`) are constants of a step, as in
 //! the paper. [`SilhouetteLoss`] evaluates a whole batch as one candle op: views in parallel, the
@@ -270,10 +272,11 @@ pub struct ViewTerms {
     pub contour_grad: Vec<(u32, Vec3)>,
     /// The boundary vertices `B` (sorted).
     pub boundary_vertices: Vec<u32>,
-    /// `∂boundary/∂b`, the boundary sum's derivative with respect to the view's outline offset.
-    pub boundary_offset_grad: f64,
-    /// `∂contour/∂b`.
-    pub contour_offset_grad: f64,
+    /// `∂boundary_distance/∂b = Σ_{i∈B} sign(s_i + b)`: the derivative of the boundary
+    /// distances (not of the Huber sum) with respect to the view's outline offset.
+    pub boundary_distance_offset_grad: f64,
+    /// `∂contour_distance/∂b`: the contour distances' derivative with respect to the offset.
+    pub contour_distance_offset_grad: f64,
 }
 
 /// Eq. 10 for one view of the posed mesh `positions` (triangles `triangles`, edge table
@@ -336,7 +339,10 @@ pub fn view_terms_with_offset(
             // ∂ρ(|r|)/∂r = ρ'·sign(r); ∂r/∂uv = the outward normal, ∂r/∂b = 1.
             let g = drho * r.signum();
             out.boundary_grad.push(pull(i, outward * g));
-            out.boundary_offset_grad += f64::from(g);
+        }
+        if r != 0.0 {
+            // ∂|r|/∂b = sign(r).
+            out.boundary_distance_offset_grad += f64::from(r.signum());
         }
     }
     out.boundary_count = verts.len();
@@ -364,14 +370,16 @@ pub fn view_terms_with_offset(
         out.contour += f64::from(wp * rho);
         out.contour_distance += f64::from(wp * r);
         out.contour_weight += f64::from(wp);
-        if r > 0.0 && drho != 0.0 {
+        if r > 0.0 {
             let q = segments[k as usize][0] * (1.0 - t) + segments[k as usize][1] * t;
-            let g = (q - p) / r * (wp * drho);
-            let [a, b] = table.edges[edges[k as usize] as usize];
-            out.contour_grad.push(pull(a, g * (1.0 - t)));
-            out.contour_grad.push(pull(b, g * t));
             // ∂r/∂b = (p − q)·(−m)/r, since p moves by −m per unit of offset.
-            out.contour_offset_grad += f64::from(g.dot(m));
+            out.contour_distance_offset_grad += f64::from(wp * (q - p).dot(m) / r);
+            if drho != 0.0 {
+                let g = (q - p) / r * (wp * drho);
+                let [a, b] = table.edges[edges[k as usize] as usize];
+                out.contour_grad.push(pull(a, g * (1.0 - t)));
+                out.contour_grad.push(pull(b, g * t));
+            }
         }
     }
     out
@@ -390,9 +398,15 @@ pub struct BatchView {
 
 /// The silhouette loss of a batch of posed meshes `[B, V, 3]` as one candle op. Its output is
 /// `[4]`: the boundary and contour terms (each the mean over views of a view's normalised sum:
-/// `Σρ/|B|` and `Σwρ/W`, differentiable) and, for logging, the mean boundary-vertex and contour
-/// distances in pixels (no gradient). Its second input holds each view's outline offset
-/// ([`view_terms_with_offset`]; zeros for the plain loss), and is differentiable too.
+/// `Σρ/|B|` and `Σwρ/W`), differentiable in the posed positions, and the mean boundary-vertex
+/// and contour distances in pixels (`Σ|s + b|/|B|`, `Σw·r/W`), differentiable in the offsets.
+/// Its second input holds each view's outline offset ([`view_terms_with_offset`]; zeros for the
+/// plain loss).
+///
+/// Each output's gradient flows to one input only: the weights fit the Huber terms with the
+/// offsets held fixed, and the offsets fit the distances with the mesh held fixed. A uniform
+/// shift minimises the summed distances at the median of the signed margins, where the Huber
+/// terms would put it at their mean (within `δ`); see [`crate::train::outline_offset`].
 pub struct SilhouetteLoss {
     views: Vec<BatchView>,
     triangles: Arc<[[u32; 3]]>,
@@ -401,8 +415,8 @@ pub struct SilhouetteLoss {
     grads: Mutex<Option<Gradients>>,
 }
 
-/// The gradients a forward pass leaves for the backward one: each term's with respect to the
-/// posed positions and to every view's offset.
+/// The gradients a forward pass leaves for the backward one: the Huber terms' with respect to
+/// the posed positions and the distances' with respect to every view's offset.
 struct Gradients {
     positions: [Vec<f32>; 2],
     offsets: [Vec<f32>; 2],
@@ -518,7 +532,7 @@ impl CustomOp2 for SilhouetteLoss {
                 let s = 1.0 / (t.boundary_count as f64 * n);
                 values[0] += t.boundary * s;
                 values[2] += t.boundary_distance * s;
-                offset_grads[0][k] = (t.boundary_offset_grad * s) as f32;
+                offset_grads[0][k] = (t.boundary_distance_offset_grad * s) as f32;
                 for &(i, g) in &t.boundary_grad {
                     let at = base + 3 * i as usize;
                     for c in 0..3 {
@@ -530,7 +544,7 @@ impl CustomOp2 for SilhouetteLoss {
                 let s = 1.0 / (t.contour_weight * n);
                 values[1] += t.contour * s;
                 values[3] += t.contour_distance * s;
-                offset_grads[1][k] = (t.contour_offset_grad * s) as f32;
+                offset_grads[1][k] = (t.contour_distance_offset_grad * s) as f32;
                 for &(i, g) in &t.contour_grad {
                     let at = base + 3 * i as usize;
                     for c in 0..3 {
@@ -573,17 +587,17 @@ impl CustomOp2 for SilhouetteLoss {
         else {
             bail!("silhouette: backward before forward");
         };
-        let combine = |b: &[f32], c: &[f32]| -> Vec<f32> {
-            b.iter().zip(c).map(|(b, c)| g[0] * b + g[1] * c).collect()
+        let combine = |b: &[f32], c: &[f32], wb: f32, wc: f32| -> Vec<f32> {
+            b.iter().zip(c).map(|(b, c)| wb * b + wc * c).collect()
         };
         Ok((
             Some(Tensor::from_vec(
-                combine(gb, gc),
+                combine(gb, gc, g[0], g[1]),
                 arg.shape(),
                 arg.device(),
             )?),
             Some(Tensor::from_vec(
-                combine(ob, oc),
+                combine(ob, oc, g[2], g[3]),
                 offsets.shape(),
                 offsets.device(),
             )?),
