@@ -256,13 +256,15 @@ impl SegmentGrid {
 pub struct ViewTerms {
     /// `Σ_{i∈B} ρ(d(π(x_i)))`.
     pub boundary: f64,
-    /// `Σ_{i∈B} d(π(x_i))` (pixels, for logging).
+    /// `Σ_{i∈B} d(π(x_i))`, with an offset `Σ|s_i + b|` (pixels): logged, and what the
+    /// outline offsets fit.
     pub boundary_distance: f64,
     /// `|B|`.
     pub boundary_count: usize,
     /// `Σ_p w_p ρ(‖o(p) − p‖)`.
     pub contour: f64,
-    /// `Σ_p w_p ‖o(p) − p‖` (pixels × weight, for logging).
+    /// `Σ_p w_p ‖o(p) − p‖` (pixels × weight; `p` moved by the offset): logged, and what the
+    /// outline offsets fit.
     pub contour_distance: f64,
     /// `Σ_p w_p` over the points that found an outline edge.
     pub contour_weight: f64,
