@@ -1,7 +1,7 @@
 //! `trainer train` with an ensemble: every member trained in its own folder, the student
 //! distilled from them and exported, a finished run resumed to the same bytes, and an ensemble
 //! with pose refinement refused before anything trains; stage 4 moved to the full-resolution
-//! template.
+//! template; the outline offsets learned by default, and not with `--no-outline-offsets`.
 
 mod common;
 
@@ -38,6 +38,19 @@ fn an_ensemble_trains_its_members_then_distils_one_model() {
         out.contains("distilling the 2 members' mean weights"),
         "{out}"
     );
+    // Each member learns its own outline offsets (on by default); the student goes on from
+    // their mean.
+    for k in 0..2 {
+        assert!(
+            out.contains(&format!("member {}: learned outline offsets", k + 1)),
+            "{out}"
+        );
+        assert!(
+            work.join(format!("member-{k}/outline_offsets.csv"))
+                .exists()
+        );
+    }
+    assert!(work.join("outline_offsets.csv").exists());
     // The student's stage 1 is the distillation alone.
     let distil = std::fs::read_to_string(work.join("warm_start.csv")).unwrap();
     assert!(distil.lines().count() > 1, "{distil}");
@@ -132,9 +145,9 @@ fn stage_four_moves_to_the_full_resolution_template() {
     assert_eq!(fine, full);
 }
 
-/// `--outline-offsets` learns one offset per camera through stage 1 and stage 4 (moved to the
-/// full-resolution template), prints them, writes them to the work folder, and a finished run
-/// resumed writes the same model.
+/// By default one outline offset per camera is learned through stage 1 and stage 4 (moved to the
+/// full-resolution template), printed and written to the work folder, and a finished run resumed
+/// writes the same model; `--no-outline-offsets` learns none.
 #[test]
 fn outline_offsets_are_learned_printed_and_resumed() {
     let tmp = tempfile::tempdir().unwrap();
@@ -148,7 +161,7 @@ fn outline_offsets_are_learned_printed_and_resumed() {
     .unwrap();
     let model = tmp.path().join("m.skf");
     let train = |extra: &[&str]| {
-        let mut args = vec!["--train-vertices", "600", "--outline-offsets"];
+        let mut args = vec!["--train-vertices", "600"];
         args.extend_from_slice(extra);
         common::train(
             cap.to_str().unwrap(),
@@ -183,4 +196,10 @@ fn outline_offsets_are_learned_printed_and_resumed() {
     assert_eq!(code, 0, "{err}");
     assert_eq!(std::fs::read(&model).unwrap(), written);
     assert_eq!(std::fs::read_to_string(&csv_path).unwrap(), csv);
+
+    std::fs::remove_dir_all(tmp.path().join("m.skf.work")).unwrap();
+    let (code, out, err) = train(&["--no-outline-offsets"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!out.contains("learned outline offsets"), "{out}");
+    assert!(!csv_path.exists());
 }

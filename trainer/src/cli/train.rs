@@ -54,12 +54,13 @@ pub struct Args {
     /// folder.
     #[arg(long)]
     pub refine_poses: bool,
-    /// Learn one outline offset per camera with the weights (`outline_offset.enabled` in the
-    /// configuration): for masks from a segmentation whose outlines may lie a fraction of a
-    /// pixel to a pixel outside or inside the subject's. Written to `outline_offsets.csv` in the
-    /// work folder.
+    /// Trust the masks' outlines as they are: learn no outline offsets
+    /// (`"outline_offset": {"enabled": false}` in the configuration). By default one offset per
+    /// camera is learned with the weights, so that masks from a segmentation whose outlines lie
+    /// a fraction of a pixel to a pixel outside or inside the subject's move the offsets instead
+    /// of the weights (written to `outline_offsets.csv` in the work folder).
     #[arg(long)]
-    pub outline_offsets: bool,
+    pub no_outline_offsets: bool,
 }
 
 /// Runs `trainer train`.
@@ -73,8 +74,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.refine_poses {
         config.pose_refinement.enabled = true;
     }
-    if args.outline_offsets {
-        config.outline_offset.enabled = true;
+    if args.no_outline_offsets {
+        config.outline_offset.enabled = false;
     }
     let work = args
         .work
@@ -279,6 +280,7 @@ fn train_ensemble(
 ) -> anyhow::Result<(Trainer, (u64, u64))> {
     let members = config.ensemble.members;
     let mut teachers = Vec::with_capacity(members);
+    let mut offsets: Vec<Vec<f32>> = Vec::new();
     let mut ran = (0, 0);
     for k in 0..members {
         let member_config = TrainConfig {
@@ -307,6 +309,10 @@ fn train_ensemble(
         let report = member.validation_report()?;
         println!("  member {}: validation {}", k + 1, report.model);
         plot_logs(&dir, &format!("SkinNet, ensemble member {}", k + 1))?;
+        if let Some(o) = member.outline_offsets()? {
+            println!("  member {}: {}", k + 1, describe_outline_offsets(&o));
+            offsets.push(o);
+        }
         teachers.push(member.frozen_net()?);
     }
     // The student's stage 1 is the distillation; its image iterations were the members'.
@@ -316,6 +322,11 @@ fn train_ensemble(
     };
     let mut student = Trainer::new(data, student_config, false)?;
     student.distil_from(teachers)?;
+    // The student's outline offsets (for stage 4 and its validation) start at the members'
+    // mean: each member estimated the same masks' margins.
+    if let Some(mean) = mean_offsets(&offsets) {
+        student.set_outline_offsets(&mean)?;
+    }
     let checkpoint = work.join("checkpoint.safetensors");
     if resume && checkpoint.exists() {
         student.resume(&checkpoint)?;
@@ -324,6 +335,18 @@ fn train_ensemble(
     student.run(work, progress)?;
     report_warm_start(&student);
     Ok((student, ran))
+}
+
+/// Every camera's mean over the members' outline offsets (`None` without any). The members
+/// trained on the same data, so each has one offset per camera.
+fn mean_offsets(members: &[Vec<f32>]) -> Option<Vec<f32>> {
+    let first = members.first()?;
+    let n = members.len() as f32;
+    Some(
+        (0..first.len())
+            .map(|c| members.iter().map(|m| m[c]).sum::<f32>() / n)
+            .collect(),
+    )
 }
 
 /// With pose refinement: writes `work/refined_motion.json`, the capture's motion with every

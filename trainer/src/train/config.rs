@@ -227,7 +227,7 @@ pub struct TrainConfig {
     /// with tracked motion, [`super::pose_refinement`]).
     pub pose_refinement: super::PoseRefinementConfig,
     /// One outline offset per camera learned with the weights, for masks whose segmentation
-    /// grew or shrank every outline (off by default; [`super::outline_offset`]).
+    /// grew or shrank every outline (on by default; [`super::outline_offset`]).
     pub outline_offset: super::outline_offset::OutlineOffsetConfig,
     /// Several SkinNets from different seeds, their mean weights distilled into the exported
     /// one ([`super::ensemble`]); one network by default. Not with pose refinement or outline
@@ -473,9 +473,10 @@ impl TrainConfig {
         }
         self.stages.validate()?;
         self.ensemble.validate()?;
-        // Pose corrections and outline offsets belong to one run: the distilled student would
-        // start its own from zero in stage 4.
-        if self.ensemble.is_on() && (self.pose_refinement.enabled || self.outline_offset.enabled) {
+        // Pose corrections belong to one run: the distilled student would start its own from
+        // zero in stage 4. (Outline offsets are one number per camera: the student starts from
+        // the members' mean.)
+        if self.ensemble.is_on() && self.pose_refinement.enabled {
             return Err("ensemble.members");
         }
         Ok(())
@@ -572,7 +573,7 @@ mod tests {
     }
 
     #[test]
-    fn an_ensemble_has_one_to_max_members_and_no_pose_refinement_or_outline_offsets() {
+    fn an_ensemble_has_one_to_max_members_and_no_pose_refinement() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("c.json");
         let field = |text: &str| {
@@ -594,7 +595,6 @@ mod tests {
             r#"{"ensemble": {"members": 0}}"#.to_string(),
             format!(r#"{{"ensemble": {{"members": {}}}}}"#, max + 1),
             r#"{"ensemble": {"members": 2}, "pose_refinement": {"enabled": true}}"#.to_string(),
-            r#"{"ensemble": {"members": 2}, "outline_offset": {"enabled": true}}"#.to_string(),
         ] {
             assert_eq!(field(&bad), Err("ensemble.members"), "{bad}");
         }
@@ -605,6 +605,11 @@ mod tests {
         // One network with pose refinement stays valid.
         assert_eq!(field(r#"{"pose_refinement": {"enabled": true}}"#), Ok(1));
         assert_eq!(field(r#"{"outline_offset": {"enabled": true}}"#), Ok(1));
+        // Outline offsets (on by default) go with an ensemble.
+        assert_eq!(
+            field(r#"{"ensemble": {"members": 2}, "outline_offset": {"enabled": true}}"#),
+            Ok(2)
+        );
         assert_eq!(
             field(r#"{"outline_offset": {"enabled": true, "lr": 0}}"#),
             Err("outline_offset.lr")

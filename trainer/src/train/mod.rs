@@ -558,6 +558,18 @@ impl Trainer {
         })
     }
 
+    /// With [`outline_offset::OutlineOffsetConfig::enabled`]: starts every camera's outline
+    /// offset at `values` (pixels) instead of zero: what an ensemble's student takes from its
+    /// members before stage 4. An error when offsets are not learned or the count differs from
+    /// the cameras'.
+    pub fn set_outline_offsets(&mut self, values: &[f32]) -> Result<(), TrainError> {
+        let offsets = self
+            .outline_offsets
+            .as_mut()
+            .ok_or_else(|| TrainError::Data("this run learns no outline offsets to set".into()))?;
+        offsets.set_values(values).map_err(TrainError::Data)
+    }
+
     /// With [`PoseRefinementConfig::enabled`]: each training frame's pose correction so far
     /// (in the training frames' order, the validation frames left out).
     pub fn pose_corrections(&self) -> Result<Option<Vec<FrameCorrection>>, TrainError> {

@@ -23,7 +23,12 @@
 //! A trained LBS model is thinner than exact masks at bent joints, on a small part of its
 //! outline: the mean (+0.047 px on the built-in capture's exact masks, +1.085 on masks grown by
 //! one pixel) takes that shortfall for a margin, the median does not (+0.003 and +1.003 px).
-//! Off by default ([`OutlineOffsetConfig`]).
+//!
+//! On by default (since 2026-12-07; [`OutlineOffsetConfig`]): a user's masks come from a
+//! segmentation, and on exact masks the offsets stay within 0.05 px of zero and cost nothing
+//! one run's noise resolves (`docs/experiments/fidelity.md`, *Outline offsets as the default*).
+//! `"outline_offset": {"enabled": false}` (`trainer train --no-outline-offsets`) trains on the
+//! masks as they are.
 
 use std::collections::HashMap;
 
@@ -32,12 +37,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::optim::{Adam, AdamConfig};
 
-/// Learned outline offsets (a [`super::TrainConfig`] field; off by default).
+/// Learned outline offsets (a [`super::TrainConfig`] field; on by default).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutlineOffsetConfig {
     /// Learn one outline offset per camera with the weights (for masks from a segmentation
-    /// that may grow or shrink every outline).
+    /// that may grow or shrink every outline); `false` trusts the masks' outlines as they are.
     pub enabled: bool,
     /// Adam's learning rate of the offsets (pixels per step), scaled by the image iterations'
     /// schedule (warm-up and cosine decay).
@@ -47,7 +52,7 @@ pub struct OutlineOffsetConfig {
 impl Default for OutlineOffsetConfig {
     fn default() -> Self {
         Self {
-            enabled: false,
+            enabled: true,
             lr: 1e-2,
         }
     }
@@ -116,6 +121,19 @@ impl OutlineOffsets {
     /// Every camera's offset (pixels).
     pub(crate) fn values(&self) -> candle_core::Result<Vec<f32>> {
         self.offsets.as_tensor().to_vec1()
+    }
+
+    /// Sets every camera's offset (pixels), leaving the optimiser's moments as they are.
+    pub(crate) fn set_values(&mut self, values: &[f32]) -> Result<(), String> {
+        if values.len() != self.offsets.dims1().map_err(|e| e.to_string())? {
+            return Err(format!(
+                "{} outline offsets for {} cameras",
+                values.len(),
+                self.offsets.elem_count()
+            ));
+        }
+        let t = Tensor::new(values, &Device::Cpu).map_err(|e| e.to_string())?;
+        self.offsets.set(&t).map_err(|e| e.to_string())
     }
 
     /// The state for a checkpoint: the offsets and their optimiser's moments.

@@ -1577,3 +1577,30 @@ fn learned_outline_offsets_take_up_a_masks_margin_instead_of_the_weights() {
         );
     }
 }
+
+/// What an ensemble's student does with its members' offsets: they are set as given (and the
+/// validation then scores against the masks moved by them), refused when their count is not
+/// the cameras' or when the run learns no offsets.
+#[test]
+fn outline_offsets_can_be_set_before_a_run_goes_on() {
+    let (data, _) = scene(8);
+    let mut t = Trainer::new(data.clone(), config(), false).unwrap();
+    assert_eq!(t.outline_offsets().unwrap(), Some(vec![0.0]));
+    let at_zero = t.validate().unwrap();
+    t.set_outline_offsets(&[0.75]).unwrap();
+    assert_eq!(t.outline_offsets().unwrap(), Some(vec![0.75]));
+    let moved = t.validate().unwrap();
+    assert_ne!(moved.silhouette_px, at_zero.silhouette_px);
+    assert!(t.set_outline_offsets(&[0.1, 0.2]).is_err());
+    assert_eq!(t.outline_offsets().unwrap(), Some(vec![0.75]));
+    let off = TrainConfig {
+        outline_offset: super::outline_offset::OutlineOffsetConfig {
+            enabled: false,
+            ..Default::default()
+        },
+        ..config()
+    };
+    let mut t = Trainer::new(data, off, false).unwrap();
+    assert_eq!(t.outline_offsets().unwrap(), None);
+    assert!(t.set_outline_offsets(&[0.75]).is_err());
+}
