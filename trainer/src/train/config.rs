@@ -230,8 +230,8 @@ pub struct TrainConfig {
     /// grew or shrank every outline (on by default; [`super::outline_offset`]).
     pub outline_offset: super::outline_offset::OutlineOffsetConfig,
     /// Several SkinNets from different seeds, their mean weights distilled into the exported
-    /// one ([`super::ensemble`]); one network by default. Not with pose refinement or outline
-    /// offsets, whose corrections belong to one run.
+    /// one ([`super::ensemble`]); one network by default. Not with pose refinement, whose
+    /// corrections belong to one run (outline offsets start the student at the members' mean).
     pub ensemble: super::ensemble::EnsembleConfig,
     /// Pose locality ([`super::pose_locality`]): during the image iterations every training
     /// vertex sees its candidate joints' pose features from its own frame and every other

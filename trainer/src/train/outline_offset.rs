@@ -125,11 +125,11 @@ impl OutlineOffsets {
 
     /// Sets every camera's offset (pixels), leaving the optimiser's moments as they are.
     pub(crate) fn set_values(&mut self, values: &[f32]) -> Result<(), String> {
-        if values.len() != self.offsets.dims1().map_err(|e| e.to_string())? {
+        let cameras = self.offsets.elem_count();
+        if values.len() != cameras {
             return Err(format!(
-                "{} outline offsets for {} cameras",
-                values.len(),
-                self.offsets.elem_count()
+                "{} outline offsets for {cameras} cameras",
+                values.len()
             ));
         }
         let t = Tensor::new(values, &Device::Cpu).map_err(|e| e.to_string())?;
