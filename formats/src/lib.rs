@@ -25,6 +25,7 @@ pub mod makehuman;
 pub mod math;
 pub mod mesh;
 pub mod pose;
+pub mod retarget;
 #[cfg(feature = "import")]
 pub mod shared_data;
 pub mod skeleton;
@@ -35,5 +36,6 @@ pub use camera::{Camera, CameraError, CameraRig, Distortion};
 pub use math::{Aabb, Transform};
 pub use mesh::{MeshError, PartLabel, Template};
 pub use pose::{POSE_FEATURE_ENCODING, Pose, PoseError, UpAxis, pose_feature_count, pose_features};
+pub use retarget::{Retarget, RetargetError};
 pub use skeleton::{Axis, JointDofs, MAX_JOINTS, Skeleton, SkeletonError};
 pub use skin::{SkinError, StaticSkin};

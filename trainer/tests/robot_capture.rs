@@ -50,6 +50,8 @@ fn synthesize_robot(
     let source = GltfSource {
         character: asset.to_path_buf(),
         motion: None,
+        joint_map: None,
+        in_place: false,
         train_clips: vec!["Walking".into()],
         test_clips: vec!["Wave".into()],
     };

@@ -125,13 +125,67 @@ fn zoo_writes_one_table_with_the_robot() {
 }
 
 #[test]
+fn zoo_drives_the_peasant_with_the_witchs_clips_retargeted() {
+    let Some(data) = shared_data_dir() else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("zoo");
+    let config = tmp.path().join("config.json");
+    std::fs::write(&config, r#"{"refuse_worse_than_initial": false}"#).unwrap();
+    let (code, err) = zoo(&[
+        "--out",
+        out.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--characters",
+        "peasant",
+        "--warm-start",
+        "1",
+        "--iterations",
+        "1",
+        "--static-iterations",
+        "1",
+        "--cameras",
+        "2",
+        "--resolution",
+        "40",
+        "--train-frames",
+        "1",
+        "--test-frames",
+        "1",
+        "--samples",
+        "500",
+        "--quiet",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("zoo.json")).unwrap()).unwrap();
+    let peasant = &json["characters"][0];
+    assert_eq!(peasant["name"], "peasant");
+    assert_eq!(
+        (&peasant["joints"], &peasant["vertices"]),
+        (&65.into(), &10184.into())
+    );
+    assert_eq!(
+        peasant["train_clips"],
+        "Idle, Walk, Run, Punch_Left, Kick_Left (quaternius-witch/Witch.gltf's, retargeted)"
+    );
+    assert_eq!(peasant["frames"], serde_json::json!([5, 3]));
+    assert!(peasant["error"].is_null());
+}
+
+#[test]
 fn zoo_refuses_unknown_characters_and_reports_missing_files() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("zoo");
     let (code, err) = zoo(&["--out", out.to_str().unwrap(), "--characters", "dragon"]);
     assert_eq!(code, 1);
     assert!(
-        err.contains("dragon") && err.contains("builtin, cesiumman, fox, robot, witch"),
+        err.contains("dragon")
+            && err.contains("builtin, cesiumman, fox, robot, witch, peasant, makehuman"),
         "{err}"
     );
     // A missing asset: the table still gets the character's row, with the reason, and the

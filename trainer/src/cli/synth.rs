@@ -7,7 +7,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args as ClapArgs;
 use skinfield_formats::capture::ImageFormat;
-use skinfield_trainer::synth::{GltfSource, SynthConfig, TestMotions, synthesize, synthesize_gltf};
+use skinfield_trainer::synth::{
+    GltfSource, JointMap, SynthConfig, TestMotions, synthesize, synthesize_gltf,
+};
 
 /// Arguments of `trainer synth`.
 #[derive(ClapArgs, Debug)]
@@ -44,12 +46,23 @@ pub struct Args {
     /// `--test-clips`).
     #[arg(long, value_enum, default_value = "novel")]
     pub test_motions: TestMotionsArg,
-    /// A rigged glTF/GLB character instead of the built-in one.
+    /// A rigged glTF/GLB character instead of the built-in one, or a MakeHuman folder
+    /// (`base.obj`, `default.mhskel`, `default_weights.mhw`; clips from `--motion`).
     #[arg(long)]
     pub character: Option<PathBuf>,
-    /// A glTF/GLB whose clips drive the character (joints matched by name).
+    /// A glTF/GLB whose clips drive the character (joints matched by name, or through
+    /// `--joint-map`), or BVH motion: a `.bvh` file or a folder of them, one clip per file
+    /// named by its stem (with `--joint-map`).
     #[arg(long, requires = "character")]
     pub motion: Option<PathBuf>,
+    /// Retarget the motion file's clips through this joint map (JSON: `{"joints":
+    /// {"character joint": "motion joint", …}}`), for a motion authored on another rig.
+    #[arg(long, requires = "motion")]
+    pub joint_map: Option<PathBuf>,
+    /// Play the retargeted motion in place: the hips keep their height changes but not their
+    /// travel across the floor (clips that walk across a room).
+    #[arg(long, requires = "joint_map")]
+    pub in_place: bool,
     /// Training clip names (with `--character`).
     #[arg(long, value_delimiter = ',', requires = "character")]
     pub train_clips: Vec<String>,
@@ -114,6 +127,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let source = GltfSource {
                 character: character.clone(),
                 motion: args.motion.clone(),
+                joint_map: args
+                    .joint_map
+                    .as_deref()
+                    .map(JointMap::read)
+                    .transpose()
+                    .context("reading --joint-map")?,
+                in_place: args.in_place,
                 train_clips: args.train_clips.clone(),
                 test_clips: args.test_clips.clone(),
             };

@@ -24,7 +24,7 @@ use skinfield_trainer::eval::{
     worst_vertex_check,
 };
 use skinfield_trainer::synth::{
-    GltfSource, SynthConfig, SynthSummary, TestMotions, synthesize, synthesize_gltf,
+    GltfSource, JointMap, SynthConfig, SynthSummary, TestMotions, synthesize, synthesize_gltf,
 };
 use skinfield_trainer::train::data::{DataOptions, initial_weights};
 use skinfield_trainer::train::{TrainConfig, WarmStatus};
@@ -55,20 +55,35 @@ pub struct ZooCharacter {
     pub about: &'static str,
     /// The glTF file under the shared data folder; `None`: the built-in character.
     pub file: Option<&'static str>,
+    /// Another file under the shared data folder whose clips drive the character, retargeted
+    /// through `joint_map` (a character shipped without animations); `None`: its own clips.
+    pub motion: Option<&'static str>,
+    /// The joint map from `motion`'s rig to the character's (the JSON of `trainer synth
+    /// --joint-map`), built into the program.
+    pub joint_map: Option<(&'static str, &'static str)>,
+    /// Play the retargeted motion in place (clips that walk across a room).
+    pub in_place: bool,
     /// Training clips (empty for the built-in character, whose library fixes them).
     pub train: &'static [&'static str],
     /// Test frames.
     pub test: TestSplit,
 }
 
-/// The zoo: every shared character with clips (Female_Peasant has none) and the built-in one.
-/// Splits chosen from the clips each file has (`trainer inspect FILE`): training on ordinary
-/// locomotion and gestures, testing on motions never trained on where the file has them.
-pub static ZOO: [ZooCharacter; 5] = [
+/// The zoo: every shared character and the built-in one. Splits chosen from the clips each
+/// file has (`trainer inspect FILE`): training on ordinary locomotion and gestures, testing on
+/// motions never trained on where the file has them. The Female_Peasant has no clips: the
+/// Witch's drive it, retargeted from its rig (Quaternius names) to the peasant's (Unreal
+/// mannequin names) with the same split as the Witch's. The MakeHuman body has none either:
+/// CMU motion capture drives it (a walk with a crouch and jumping jacks for training, hops for
+/// testing), in place, since the walk and the hops cross 3 m.
+pub static ZOO: [ZooCharacter; 7] = [
     ZooCharacter {
         name: "builtin",
         about: "procedural clothed human, skirt and sleeves, DQS + bulges + skirt push-out",
         file: None,
+        motion: None,
+        joint_map: None,
+        in_place: false,
         train: &[],
         test: TestSplit::BuiltIn,
     },
@@ -76,6 +91,9 @@ pub static ZOO: [ZooCharacter; 5] = [
         name: "cesiumman",
         about: "one walk clip: tested on held-out phases of it",
         file: Some("khronos-cesiumman/CesiumMan.glb"),
+        motion: None,
+        joint_map: None,
+        in_place: false,
         train: &["animation_0"],
         test: TestSplit::HeldOutPhases,
     },
@@ -83,6 +101,9 @@ pub static ZOO: [ZooCharacter; 5] = [
         name: "fox",
         about: "quadruped, 155 × 79 units",
         file: Some("khronos-fox/Fox.glb"),
+        motion: None,
+        joint_map: None,
+        in_place: false,
         train: &["Survey", "Walk"],
         test: TestSplit::Clips(&["Run"]),
     },
@@ -90,6 +111,9 @@ pub static ZOO: [ZooCharacter; 5] = [
         name: "robot",
         about: "rigid robot parts + two skinned hands, mesh scaled ×100 by its armature",
         file: Some("threejs-robotexpressive/RobotExpressive.glb"),
+        motion: None,
+        joint_map: None,
+        in_place: false,
         train: &["Idle", "Walking", "Running", "Dance", "Punch"],
         test: TestSplit::Clips(&["Wave", "ThumbsUp", "Jump"]),
     },
@@ -97,8 +121,38 @@ pub static ZOO: [ZooCharacter; 5] = [
         name: "witch",
         about: "skirt, 62 joints, unwelded",
         file: Some("quaternius-witch/Witch.gltf"),
+        motion: None,
+        joint_map: None,
+        in_place: false,
         train: &["Idle", "Walk", "Run", "Punch_Left", "Kick_Left"],
         test: TestSplit::Clips(&["Kick_Right", "Punch_Right", "Wave"]),
+    },
+    ZooCharacter {
+        name: "peasant",
+        about: "long skirt, 65 joints, no clips of its own: the Witch's, retargeted",
+        file: Some("quaternius-female-peasant/Female_Peasant.gltf"),
+        motion: Some("quaternius-witch/Witch.gltf"),
+        joint_map: Some((
+            "trainer/joint-maps/quaternius-to-ue-mannequin.json",
+            include_str!("../../joint-maps/quaternius-to-ue-mannequin.json"),
+        )),
+        in_place: false,
+        train: &["Idle", "Walk", "Run", "Punch_Left", "Kick_Left"],
+        test: TestSplit::Clips(&["Kick_Right", "Punch_Right", "Wave"]),
+    },
+    ZooCharacter {
+        name: "makehuman",
+        about: "MakeHuman body, 163 joints (fingers, toes, face); CMU motion capture (BVH), \
+                retargeted and played in place",
+        file: Some("makehuman-hm08"),
+        motion: Some("mocap-cmu"),
+        joint_map: Some((
+            "trainer/joint-maps/cmu-bvh-to-makehuman.json",
+            include_str!("../../joint-maps/cmu-bvh-to-makehuman.json"),
+        )),
+        in_place: true,
+        train: &["131_01", "jumping_jacks"],
+        test: TestSplit::Clips(&["131_03"]),
     },
 ];
 
@@ -118,7 +172,8 @@ pub struct Args {
     /// The shared data folder (default: `$SKINFIELD_SHARED_DATA`, else `../shared/data`).
     #[arg(long)]
     pub data: Option<PathBuf>,
-    /// Only these characters (comma-separated names: builtin, cesiumman, fox, robot, witch).
+    /// Only these characters (comma-separated names: builtin, cesiumman, fox, robot, witch,
+    /// peasant, makehuman).
     #[arg(long, value_delimiter = ',')]
     pub characters: Vec<String>,
     /// A small budget for trying the pipeline: 30 iterations each unless given.
@@ -423,6 +478,10 @@ fn run_character(
             "held-out phases of the training clip".to_string(),
         ),
     };
+    let train_clips = match character.motion {
+        Some(m) => format!("{train_clips} ({m}'s, retargeted)"),
+        None => train_clips,
+    };
     let mut result = ZooResult {
         name: character.name.into(),
         file: character.file.unwrap_or("built-in").into(),
@@ -477,7 +536,7 @@ fn fill_character(
         (None, _) => synthesize(&capture_dir, &synth)?,
         (Some(file), test) => {
             let path = data.join(file);
-            if !path.is_file() {
+            if !path.exists() {
                 bail!(
                     "{} not found (set --data or SKINFIELD_SHARED_DATA)",
                     path.display()
@@ -485,7 +544,12 @@ fn fill_character(
             }
             let source = GltfSource {
                 character: path,
-                motion: None,
+                motion: character.motion.map(|m| data.join(m)),
+                joint_map: character
+                    .joint_map
+                    .map(|(origin, json)| JointMap::parse(origin.into(), json))
+                    .transpose()?,
+                in_place: character.in_place,
                 train_clips: character.train.iter().map(|c| c.to_string()).collect(),
                 test_clips: match test {
                     TestSplit::Clips(c) => c.iter().map(|c| c.to_string()).collect(),

@@ -4,7 +4,8 @@
 //! skin (other skins over the same joints and rigid mesh nodes below its joints merged, in the
 //! rest scene's space: [`super::gltf_character`]); the artist weights are the ground truth's
 //! static part. Motion comes from named clips of the same file
-//! or of another glTF whose joints are matched by name (`--motion`). The ground-truth deformer
+//! or of another glTF whose joints are matched by name (`--motion`), or retargeted from another
+//! rig through a joint map (`--joint-map`, [`super::joint_map`]). The ground-truth deformer
 //! is dual-quaternion skinning with the artist weights plus the flexion bulge at joints whose
 //! names mark an elbow or a knee ([`is_bulge_joint`]); rigid parts (mesh nodes that follow a
 //! joint, such as a robot's limbs) move rigidly and never bulge. glTF files carry no skin /
@@ -20,12 +21,15 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 use skinfield_formats::gltf_io::{GltfDocument, load_gltf};
+use skinfield_formats::makehuman::{MakeHumanOptions, load_makehuman_dir};
 use skinfield_formats::mesh::area_weighted_normals;
 use skinfield_formats::{Aabb, Pose};
 
 use super::body::Part;
+use super::clips::Motion;
 use super::deform::GroundTruthDeformer;
-use super::gltf_character::{GltfCharacter, PartSource, assemble};
+use super::gltf_character::{CharacterPart, GltfCharacter, PartSource, assemble};
+use super::joint_map::JointMap;
 use super::motion::Split;
 use super::output::{Subject, SynthSummary, write_subject};
 use super::rig::{Framing, camera_rig_framed};
@@ -35,10 +39,22 @@ use super::{SynthConfig, SynthError, TestMotions};
 /// Where a glTF capture's character and motion come from.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GltfSource {
-    /// The rigged character.
+    /// The rigged character: a glTF/GLB file, or a MakeHuman folder (`base.obj`,
+    /// `default.mhskel`, `default_weights.mhw`), which has no clips of its own.
     pub character: PathBuf,
-    /// Another glTF with the clips (joints matched by name); `None`: the character's own.
+    /// Another glTF with the clips (joints matched by name, or retargeted through
+    /// `joint_map`), or BVH motion (a `.bvh` file or a folder of them, one clip per file named
+    /// by its stem; always through `joint_map`); `None`: the character's own.
     pub motion: Option<PathBuf>,
+    /// Which joint of the motion's skeleton drives which joint of the character's, for a
+    /// motion authored on another rig: its poses are retargeted
+    /// ([`skinfield_formats::Retarget`]: bone directions, with the two rest poses, facings and
+    /// sizes reconciled) instead of copied by name. Only with `motion`.
+    pub joint_map: Option<JointMap>,
+    /// Play the retargeted motion in place: the hips keep their height changes but not their
+    /// travel across the floor, so the cameras frame the character rather than its path
+    /// (`Retarget::in_place`). Only with `joint_map`.
+    pub in_place: bool,
     /// Clip names for training.
     pub train_clips: Vec<String>,
     /// Clip names for testing (disjoint from the training clips).
@@ -114,35 +130,58 @@ pub fn synthesize_gltf(
             reason: format!("`{c}` is also a training clip"),
         });
     }
-    let doc = load(&source.character)?;
-    let character = assemble(&doc)?;
-    let skin = doc.largest_skin().ok_or_else(|| SynthError::Config {
-        field: "character",
-        reason: format!("{} has no skin", source.character.display()),
-    })?;
-    let motion_doc = match &source.motion {
-        Some(p) => Some(load(p)?),
+    let (doc, character) = if source.character.is_dir() {
+        (None, makehuman_character(&source.character)?)
+    } else {
+        let doc = load(&source.character)?;
+        let character = assemble(&doc)?;
+        (Some(doc), character)
+    };
+    let own = match &doc {
+        Some(d) => Some((
+            d,
+            d.largest_skin().ok_or_else(|| SynthError::Config {
+                field: "character",
+                reason: format!("{} has no skin", source.character.display()),
+            })?,
+        )),
         None => None,
     };
-    let clips_doc = motion_doc.as_ref().unwrap_or(&doc);
+    // Poses are expressed on the file's skin for a glTF character (the same joints as the
+    // canonical skeleton), on the character's own skeleton otherwise.
+    let pose_skeleton = own.map_or(&character.skeleton, |(_, skin)| &skin.skeleton);
+    let wanted: Vec<String> = source
+        .train_clips
+        .iter()
+        .chain(&source.test_clips)
+        .cloned()
+        .collect();
+    let motion = Motion::open(
+        source.motion.as_deref(),
+        source.joint_map.as_ref(),
+        pose_skeleton,
+        &wanted,
+        source.in_place,
+    )?;
+    if own.is_none() && matches!(motion, Motion::Own | Motion::GltfByName(_)) {
+        return Err(SynthError::Config {
+            field: "motion",
+            reason: format!(
+                "{} has no clips and no joint names in common with a motion file: give a \
+                 motion (glTF or BVH) and a joint map",
+                source.character.display()
+            ),
+        });
+    }
     let clip_named = |name: &str, field: &'static str| {
-        clips_doc.clip(name).ok_or_else(|| SynthError::Config {
+        motion.clip(name, own).ok_or_else(|| SynthError::Config {
             field,
             reason: format!(
                 "no clip `{name}` in {}; it has: {}",
-                clips_doc.source.display(),
-                clips_doc
-                    .clips
-                    .iter()
-                    .map(|c| c.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                motion.describe(doc.as_ref()),
+                motion.names(doc.as_ref()).join(", ")
             ),
         })
-    };
-    let sample = |clip: &skinfield_formats::gltf_io::Clip, t: f32| match motion_doc {
-        None => clip.sample(skin, t),
-        Some(_) => clip.sample_by_name(&skin.skeleton, &skin.default_pose(), t),
     };
     // Training phase i of n sits at (i + ½)/n of the clip; a held-out phase at (k + 1)/T, midway
     // between training phases k and k + 1 (distinct while test ≤ train frames, which the
@@ -153,7 +192,7 @@ pub fn synthesize_gltf(
         let clip = clip_named(name, "train_clips")?;
         for i in 0..n_train {
             let t = clip.duration_s * (i as f32 + 0.5) / n_train as f32;
-            frames.push((name.clone(), Split::Train, sample(clip, t)));
+            frames.push((name.clone(), Split::Train, clip.pose(t)?));
         }
     }
     if held_out {
@@ -162,7 +201,7 @@ pub fn synthesize_gltf(
             for i in 0..n_test {
                 let phase = (i * n_train / n_test + 1) as f32 / n_train as f32;
                 let t = clip.duration_s * phase;
-                frames.push((format!("{name}_heldout"), Split::Test, sample(clip, t)));
+                frames.push((format!("{name}_heldout"), Split::Test, clip.pose(t)?));
             }
         }
     } else {
@@ -170,7 +209,7 @@ pub fn synthesize_gltf(
             let clip = clip_named(name, "test_clips")?;
             for i in 0..n_test {
                 let t = clip.duration_s * (i as f32 + 0.5) / n_test as f32;
-                frames.push((name.clone(), Split::Test, sample(clip, t)));
+                frames.push((name.clone(), Split::Test, clip.pose(t)?));
             }
         }
     }
@@ -256,6 +295,35 @@ pub fn synthesize_gltf(
                 .into(),
     };
     write_subject(dir, config, &subject, start, character_seconds)
+}
+
+/// A MakeHuman character (a folder with `base.obj`, `default.mhskel` and
+/// `default_weights.mhw`; the body group, in metres) as one skinned part.
+fn makehuman_character(dir: &Path) -> Result<GltfCharacter, SynthError> {
+    let asset =
+        load_makehuman_dir(dir, &MakeHumanOptions::default()).map_err(|e| SynthError::Config {
+            field: "character",
+            reason: e.to_string(),
+        })?;
+    let vertex_count = asset.template.vertex_count();
+    Ok(GltfCharacter {
+        skeleton: asset.skeleton,
+        template: asset.template,
+        skin: asset.skin,
+        parts: vec![CharacterPart {
+            source: PartSource::Skinned {
+                skin: 0,
+                mesh: 0,
+                primitive: 0,
+            },
+            name: "body".into(),
+            material: None,
+            first_vertex: 0,
+            vertex_count,
+        }],
+        rest_transform: glam::Mat4::IDENTITY,
+        left_out: Vec::new(),
+    })
 }
 
 /// One flag per template vertex: whether it belongs to a rigid part (a mesh node that follows

@@ -14,9 +14,11 @@ use skinfield_formats::{Skeleton, SkeletonError, SkinError, Template};
 
 pub mod body;
 pub mod character;
+mod clips;
 pub mod deform;
 pub mod gltf_character;
 pub mod gltf_source;
+pub mod joint_map;
 pub mod labels;
 pub mod mask_error;
 pub mod motion;
@@ -26,6 +28,7 @@ pub mod texture;
 pub mod weights;
 
 pub use gltf_source::{GltfSource, synthesize_gltf};
+pub use joint_map::JointMap;
 pub use motion::TestMotions;
 pub use output::{SynthSummary, synthesize};
 
@@ -44,6 +47,15 @@ pub enum SynthError {
     /// Writing the capture failed.
     #[error(transparent)]
     Capture(#[from] CaptureError),
+    /// The joint map (`--joint-map`) cannot be read, is not a JSON object of joint names, or
+    /// does not fit the character's and the motion's skeletons.
+    #[error("joint map {}: {reason}", path.display())]
+    JointMap {
+        /// The file (or what the map was built from).
+        path: std::path::PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
     /// The configuration is unusable.
     #[error("synth configuration: field `{field}`: {reason}")]
     Config {

@@ -331,6 +331,8 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
     let source = GltfSource {
         character: data.join("quaternius-witch/Witch.gltf"),
         motion: None,
+        joint_map: None,
+        in_place: false,
         train_clips: vec!["Walk".into()],
         test_clips: vec!["Kick_Left".into()],
     };
@@ -428,6 +430,220 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
     ));
 }
 
+#[test]
+fn a_motion_from_another_rig_is_retargeted_through_a_joint_map() {
+    let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
+        return;
+    };
+    let witch = data.join("quaternius-witch/Witch.gltf");
+    let map_file =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("joint-maps/quaternius-to-ue-mannequin.json");
+    let map = JointMap::read(&map_file).unwrap();
+    // The peasant has no clips; the Witch's drive it (other names, proportions, rest pose).
+    let source = GltfSource {
+        character: data.join("quaternius-female-peasant/Female_Peasant.gltf"),
+        motion: Some(witch.clone()),
+        joint_map: Some(map.clone()),
+        in_place: false,
+        train_clips: vec!["Walk".into()],
+        test_clips: vec!["Wave".into()],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig {
+        train_frames_per_clip: 2,
+        test_frames_per_clip: 2,
+        ..SynthConfig::tiny()
+    };
+    synthesize_gltf(dir.path(), &config, &source).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    assert_eq!(
+        (cap.skeleton.len(), cap.template.vertex_count()),
+        (65, 10184)
+    );
+    let mask = cap.load_mask(0, 3).unwrap();
+    assert!(mask.inside.iter().filter(|&&m| m).count() > 50);
+    // Each frame's mapped bones point where the Witch's do at the same clip time, in the
+    // peasant's frame: the retargeting, checked end to end on the two real rigs.
+    let doc = skinfield_formats::gltf_io::load_gltf(&witch).unwrap();
+    let skin = doc.largest_skin().unwrap();
+    let frame = skinfield_formats::Retarget::new(&skin.skeleton, &cap.skeleton, &map.pairs)
+        .unwrap()
+        .frame();
+    let world = |skeleton: &skinfield_formats::Skeleton, pose: &skinfield_formats::Pose| {
+        let mut w = vec![Mat4::IDENTITY; skeleton.len()];
+        skeleton.world_matrices(pose, &mut w).unwrap();
+        w
+    };
+    let bone = |skeleton: &skinfield_formats::Skeleton, w: &[Mat4], a: &str, b: &str| {
+        let at = |n: &str| w[skeleton.find(n).unwrap()].w_axis.truncate();
+        (at(b) - at(a)).normalize()
+    };
+    let bones = [
+        (("spine_01", "spine_02"), ("Abdomen", "Torso")),
+        (("upperarm_l", "lowerarm_l"), ("UpperArm.L", "LowerArm.L")),
+        (("lowerarm_r", "hand_r"), ("LowerArm.R", "Wrist.R")),
+        (("thigh_l", "calf_l"), ("UpperLeg.L", "LowerLeg.L")),
+        (("thigh_r", "calf_r"), ("UpperLeg.R", "LowerLeg.R")),
+    ];
+    for (k, (clip, i)) in [("Walk", 0), ("Walk", 1), ("Wave", 0), ("Wave", 1)]
+        .into_iter()
+        .enumerate()
+    {
+        let clip = doc.clip(clip).unwrap();
+        let t = clip.duration_s * (i as f32 + 0.5) / 2.0;
+        let (p, w) = (
+            world(&cap.skeleton, &cap.poses[k]),
+            world(&skin.skeleton, &clip.sample(skin, t)),
+        );
+        for ((pa, pb), (wa, wb)) in bones {
+            let (got, want) = (
+                bone(&cap.skeleton, &p, pa, pb),
+                frame * bone(&skin.skeleton, &w, wa, wb),
+            );
+            assert!(
+                got.angle_between(want) < 1f32.to_radians(),
+                "frame {k}, {pa}: {got} against {want}"
+            );
+        }
+    }
+    // A map without a motion file, and one naming a joint neither rig has, are refused with
+    // the map's origin in the message.
+    let alone = GltfSource {
+        motion: None,
+        ..source.clone()
+    };
+    let e = synthesize_gltf(dir.path(), &config, &alone).unwrap_err();
+    assert!(
+        matches!(&e, SynthError::JointMap { path, .. } if *path == map_file),
+        "{e}"
+    );
+    let mut wrong = map.clone();
+    wrong.pairs.push(("tail".into(), "Hips".into()));
+    let e = synthesize_gltf(
+        dir.path(),
+        &config,
+        &GltfSource {
+            joint_map: Some(wrong),
+            ..source.clone()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("quaternius-to-ue-mannequin.json") && e.contains("`tail`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bvh_motion_capture_drives_the_makehuman_body_in_place() {
+    let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
+        return;
+    };
+    let map = JointMap::read(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("joint-maps/cmu-bvh-to-makehuman.json"),
+    )
+    .unwrap();
+    let mocap = data.join("mocap-cmu");
+    let source = GltfSource {
+        character: data.join("makehuman-hm08"),
+        motion: Some(mocap.clone()),
+        joint_map: Some(map.clone()),
+        in_place: true,
+        train_clips: vec!["131_01".into()],
+        test_clips: vec!["jumping_jacks".into()],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig {
+        train_frames_per_clip: 3,
+        test_frames_per_clip: 2,
+        ..SynthConfig::tiny()
+    };
+    synthesize_gltf(dir.path(), &config, &source).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    assert_eq!(
+        (cap.skeleton.len(), cap.template.vertex_count()),
+        (163, 13380)
+    );
+    assert!(
+        cap.load_mask(0, 4)
+            .unwrap()
+            .inside
+            .iter()
+            .filter(|&&m| m)
+            .count()
+            > 50
+    );
+    let world = |skeleton: &skinfield_formats::Skeleton, pose: &skinfield_formats::Pose| {
+        let mut w = vec![Mat4::IDENTITY; skeleton.len()];
+        skeleton.world_matrices(pose, &mut w).unwrap();
+        w
+    };
+    let at = |s: &skinfield_formats::Skeleton, w: &[Mat4], n: &str| {
+        w[s.find(n).unwrap()].w_axis.truncate()
+    };
+    let rest = at(
+        &cap.skeleton,
+        &world(&cap.skeleton, &cap.skeleton.bind_pose()),
+        "root",
+    );
+    let options = skinfield_formats::bvh::BvhOptions {
+        unit_scale: skinfield_formats::bvh::CMU_UNIT_TO_METRES,
+    };
+    let walk = skinfield_formats::bvh::load_bvh_with(mocap.join("131_01.bvh"), &options).unwrap();
+    let frame = skinfield_formats::Retarget::new(&walk.skeleton, &cap.skeleton, &map.pairs)
+        .unwrap()
+        .frame();
+    for i in 0..3 {
+        let w = world(&cap.skeleton, &cap.poses[i]);
+        // In place: the hips never leave the spot above their rest position.
+        let hips = at(&cap.skeleton, &w, "root");
+        assert!(
+            (hips.x - rest.x).abs() < 1e-4 && (hips.z - rest.z).abs() < 1e-4,
+            "frame {i}: hips at {hips}, rest {rest}"
+        );
+        // The arms and legs point where the actor's did at that frame.
+        let t = walk.duration_s() * (i as f32 + 0.5) / 3.0;
+        let k = (t / walk.frame_time) as usize;
+        let b = world(&walk.skeleton, &walk.poses[k]);
+        for ((ta, tb), (sa, sb)) in [
+            (
+                ("upperarm01.L", "lowerarm01.L"),
+                ("LeftShoulder", "LeftElbow"),
+            ),
+            (("upperleg01.R", "lowerleg01.R"), ("RightHip", "RightKnee")),
+            (("lowerleg01.L", "foot.L"), ("LeftKnee", "LeftAnkle")),
+        ] {
+            let got = (at(&cap.skeleton, &w, tb) - at(&cap.skeleton, &w, ta)).normalize();
+            let want =
+                frame * (at(&walk.skeleton, &b, sb) - at(&walk.skeleton, &b, sa)).normalize();
+            assert!(
+                got.angle_between(want) < 1f32.to_radians(),
+                "frame {i}, {ta}: {got} against {want}"
+            );
+        }
+    }
+    // BVH motion needs a joint map; in place needs one too.
+    for bad in [
+        GltfSource {
+            joint_map: None,
+            in_place: false,
+            ..source.clone()
+        },
+        GltfSource {
+            motion: Some(data.join("quaternius-witch/Witch.gltf")),
+            joint_map: None,
+            ..source.clone()
+        },
+    ] {
+        let e = synthesize_gltf(dir.path(), &config, &bad).unwrap_err();
+        assert!(
+            matches!(e, SynthError::Config { field, .. } if field == "joint_map" || field == "in_place"),
+            "{e}"
+        );
+    }
+}
+
 /// Every vertex of `positions` projects inside every camera's image, `margin` pixels from the
 /// border; returns the largest fraction of the image side the projections span in any camera.
 fn assert_in_view(
@@ -512,6 +728,8 @@ fn fox_capture_frames_the_quadruped() {
     let source = GltfSource {
         character: data.join("khronos-fox/Fox.glb"),
         motion: None,
+        joint_map: None,
+        in_place: false,
         train_clips: vec!["Survey".into(), "Walk".into()],
         test_clips: vec!["Run".into()],
     };
@@ -548,6 +766,8 @@ fn gltf_held_out_phases_test_the_training_clip_between_its_frames() {
     let source = GltfSource {
         character: path.clone(),
         motion: None,
+        joint_map: None,
+        in_place: false,
         train_clips: vec!["animation_0".into()],
         test_clips: Vec::new(),
     };

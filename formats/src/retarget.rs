@@ -1,0 +1,380 @@
+//! Motion retargeting between two skeletons whose joints differ in names, proportions, rest
+//! pose and orientation: a pose of the *source* skeleton (the one a clip was authored for)
+//! becomes a pose of the *target* skeleton that points every mapped bone the same way.
+//!
+//! The method is the usual bone-direction transfer of engine retargeters, in world space:
+//!
+//! 1. **Frames.** The two characters may face different ways or be modelled in different units.
+//!    A similarity `(G, s)` aligns them: `G` is the rotation that best maps the source's mapped
+//!    joints (rest positions, centred) onto the target's (Horn's closed form, a 4 × 4 symmetric
+//!    eigenproblem solved by Jacobi sweeps), `s` the ratio of the mapped bones' summed lengths
+//!    (insensitive to the rest poses differing, unlike a ratio of spreads).
+//! 2. **Rest poses.** A target joint whose bone runs to exactly one mapped joint (its *aim*: the
+//!    nearest mapped descendants, through unmapped joints) gets the smallest rotation `A_t` that
+//!    turns its rest bone onto the direction of the corresponding source bone (`G`-rotated); so a
+//!    T-posed motion drives an A-posed character correctly. Branching joints (pelvis, chest) and
+//!    chain ends take `A_t = 1`.
+//! 3. **Per frame.** Each mapped source joint's world rotation relative to its rest,
+//!    `Δ_s = R_s · R̄_s⁻¹`, carried into the target's frame, gives the target joint's world
+//!    rotation `R_t = (G Δ_s G⁻¹) · A_t · R̄_t`. Unmapped target joints keep their rest local
+//!    rotation (they follow their parent). Every local translation keeps the target's rest bone
+//!    lengths, except the mapped joints without a mapped ancestor (the hips), whose world
+//!    position moves by the source's displacement from rest, rotated by `G` and scaled by `s`
+//!    ([`Retarget::in_place`] keeps only its vertical part).
+//!
+//! The rest of each skeleton is its bind pose ([`Skeleton::bind_local`]: the pose its mesh was
+//! modelled in). Scales are taken as uniform: world rotations come from the decomposed world
+//! matrices. Retargeting is an import-time step (it allocates per call); an engine that plays
+//! retargeted clips bakes them once.
+
+use alloc::string::String;
+use alloc::vec;
+use alloc::vec::Vec;
+
+use glam::{Mat4, Quat, Vec3};
+
+use crate::pose::Pose;
+use crate::skeleton::{Skeleton, SkeletonError};
+
+/// Why a retargeting cannot be set up or applied.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RetargetError {
+    /// The joint map pairs no joints.
+    #[error("the joint map is empty")]
+    EmptyMap,
+    /// A name in the map is not a joint of the source skeleton.
+    #[error("source joint `{0}` of the joint map is not in the source skeleton")]
+    UnknownSourceJoint(String),
+    /// A name in the map is not a joint of the target skeleton.
+    #[error("target joint `{0}` of the joint map is not in the target skeleton")]
+    UnknownTargetJoint(String),
+    /// A target joint is mapped twice.
+    #[error("target joint `{0}` is mapped more than once")]
+    DuplicateTargetJoint(String),
+    /// A source pose does not fit the source skeleton (wrong joint count, non-finite values).
+    #[error("source pose: {0}")]
+    SourcePose(SkeletonError),
+    /// The retargeted pose is not finite (a degenerate world matrix on the way).
+    #[error("the retargeted pose of target joint `{0}` is not finite")]
+    NonFinite(String),
+}
+
+/// A set-up retargeting from one skeleton to another; [`Retarget::apply`] converts poses.
+#[derive(Clone, Debug)]
+pub struct Retarget {
+    source: Skeleton,
+    target: Skeleton,
+    /// Per target joint, its source joint.
+    source_of: Vec<Option<usize>>,
+    /// Per target joint, whether it moves its world position with the source (a mapped joint
+    /// with no mapped ancestor).
+    translates: Vec<bool>,
+    /// The rest world rotation of every source joint, inverted.
+    source_rest_inverse: Vec<Quat>,
+    /// The rest world position of every source joint.
+    source_rest_position: Vec<Vec3>,
+    /// Per target joint, `A_t · R̄_t` (the rest world rotation turned onto the source's bone).
+    target_aligned_rest: Vec<Quat>,
+    /// The rest world position of every target joint.
+    target_rest_position: Vec<Vec3>,
+    /// `G`, source frame to target frame.
+    frame: Quat,
+    /// `s`, source lengths to target lengths.
+    scale: f32,
+    /// With [`Retarget::in_place`], the unit up axis of the target's world: the hips' travel
+    /// across it is dropped.
+    in_place_up: Option<Vec3>,
+}
+
+impl Retarget {
+    /// Sets up the retargeting of poses of `source` onto `target`; `map` pairs a target joint
+    /// name with a source joint name. Every name must exist; a target joint is mapped at most
+    /// once (a source joint may drive several).
+    pub fn new(
+        source: &Skeleton,
+        target: &Skeleton,
+        map: &[(String, String)],
+    ) -> Result<Self, RetargetError> {
+        if map.is_empty() {
+            return Err(RetargetError::EmptyMap);
+        }
+        let mut source_of = vec![None; target.len()];
+        for (t_name, s_name) in map {
+            let t = target
+                .find(t_name)
+                .ok_or_else(|| RetargetError::UnknownTargetJoint(t_name.clone()))?;
+            let s = source
+                .find(s_name)
+                .ok_or_else(|| RetargetError::UnknownSourceJoint(s_name.clone()))?;
+            if source_of[t].replace(s).is_some() {
+                return Err(RetargetError::DuplicateTargetJoint(t_name.clone()));
+            }
+        }
+        let (source_rest_rotation, source_rest_position) = world_rest(source);
+        let (target_rest_rotation, target_rest_position) = world_rest(target);
+        let mut translates = vec![false; target.len()];
+        for t in 0..target.len() {
+            translates[t] =
+                source_of[t].is_some() && !ancestors(target, t).any(|a| source_of[a].is_some());
+        }
+        let aims: Vec<Option<usize>> = (0..target.len())
+            .map(|t| aim(target, &source_of, t))
+            .collect();
+        let pairs: Vec<(usize, usize)> = source_of
+            .iter()
+            .enumerate()
+            .filter_map(|(t, s)| s.map(|s| (s, t)))
+            .collect();
+        let frame = best_rotation(
+            &pairs
+                .iter()
+                .map(|&(s, t)| (source_rest_position[s], target_rest_position[t]))
+                .collect::<Vec<_>>(),
+        );
+        let (mut source_length, mut target_length) = (0.0f32, 0.0f32);
+        for (t, aim) in aims.iter().enumerate() {
+            if let (Some(a), Some(s)) = (*aim, source_of[t])
+                && let Some(sa) = source_of[a]
+            {
+                source_length += (source_rest_position[sa] - source_rest_position[s]).length();
+                target_length += (target_rest_position[a] - target_rest_position[t]).length();
+            }
+        }
+        let scale = if source_length > 0.0 && target_length > 0.0 {
+            target_length / source_length
+        } else {
+            1.0
+        };
+        let target_aligned_rest = (0..target.len())
+            .map(|t| {
+                let align = match (aims[t], source_of[t]) {
+                    (Some(a), Some(s)) => {
+                        let sa = source_of[a].unwrap_or(s);
+                        let from = target_rest_position[a] - target_rest_position[t];
+                        let to = frame * (source_rest_position[sa] - source_rest_position[s]);
+                        match (from.try_normalize(), to.try_normalize()) {
+                            (Some(from), Some(to)) => Quat::from_rotation_arc(from, to),
+                            _ => Quat::IDENTITY,
+                        }
+                    }
+                    _ => Quat::IDENTITY,
+                };
+                (align * target_rest_rotation[t]).normalize()
+            })
+            .collect();
+        Ok(Self {
+            source: source.clone(),
+            target: target.clone(),
+            source_of,
+            translates,
+            source_rest_inverse: source_rest_rotation.iter().map(|q| q.inverse()).collect(),
+            source_rest_position,
+            target_aligned_rest,
+            target_rest_position,
+            frame,
+            scale,
+            in_place_up: None,
+        })
+    }
+
+    /// The same retargeting "in place": the hips keep the source's vertical motion (along `up`,
+    /// in the target's world frame) but not its travel across the floor, so a walk stays on
+    /// the spot, as a capture volume or a game's root-motion split wants. `up` of zero length
+    /// leaves the travel in.
+    #[must_use]
+    pub fn in_place(mut self, up: Vec3) -> Self {
+        self.in_place_up = up.try_normalize();
+        self
+    }
+
+    /// The rotation `G` from the source's frame to the target's.
+    #[must_use]
+    pub fn frame(&self) -> Quat {
+        self.frame
+    }
+
+    /// The factor `s` from source lengths to target lengths.
+    #[must_use]
+    pub fn scale(&self) -> f32 {
+        self.scale
+    }
+
+    /// The source joint driving each target joint (`None`: unmapped, keeps its rest rotation).
+    #[must_use]
+    pub fn source_of(&self) -> &[Option<usize>] {
+        &self.source_of
+    }
+
+    /// The target skeleton's pose for a pose of the source skeleton.
+    pub fn apply(&self, source_pose: &Pose) -> Result<Pose, RetargetError> {
+        let mut source_world = vec![Mat4::IDENTITY; self.source.len()];
+        self.source
+            .world_matrices(source_pose, &mut source_world)
+            .map_err(RetargetError::SourcePose)?;
+        let bind = self.target.bind_local();
+        let mut locals = bind.to_vec();
+        let mut world = vec![Mat4::IDENTITY; self.target.len()];
+        for t in 0..self.target.len() {
+            let parent = match self.target.parents()[t] {
+                Some(p) => world[p],
+                None => self.target.base(),
+            };
+            if let Some(s) = self.source_of[t] {
+                let (_, rotation, position) = source_world[s].to_scale_rotation_translation();
+                let delta = rotation * self.source_rest_inverse[s];
+                let wanted =
+                    (self.frame * delta * self.frame.inverse()) * self.target_aligned_rest[t];
+                let (_, parent_rotation, _) = parent.to_scale_rotation_translation();
+                locals[t].rotation = (parent_rotation.inverse() * wanted).normalize();
+                if self.translates[t] {
+                    let mut travel =
+                        self.frame * (position - self.source_rest_position[s]) * self.scale;
+                    if let Some(up) = self.in_place_up {
+                        travel = up * travel.dot(up);
+                    }
+                    let moved = self.target_rest_position[t] + travel;
+                    locals[t].translation = parent.inverse().transform_point3(moved);
+                }
+            }
+            if !locals[t].is_finite() {
+                return Err(RetargetError::NonFinite(self.target.names()[t].clone()));
+            }
+            world[t] = parent * locals[t].to_mat4();
+        }
+        Ok(Pose { locals })
+    }
+}
+
+/// World rotations and positions of a skeleton's bind pose.
+fn world_rest(skeleton: &Skeleton) -> (Vec<Quat>, Vec<Vec3>) {
+    let mut world = vec![Mat4::IDENTITY; skeleton.len()];
+    // The bind pose of a valid skeleton always fits it.
+    if skeleton
+        .world_matrices(&skeleton.bind_pose(), &mut world)
+        .is_err()
+    {
+        return (
+            vec![Quat::IDENTITY; skeleton.len()],
+            vec![Vec3::ZERO; skeleton.len()],
+        );
+    }
+    world
+        .iter()
+        .map(|m| {
+            let (_, r, p) = m.to_scale_rotation_translation();
+            (r, p)
+        })
+        .unzip()
+}
+
+/// The ancestors of `joint`, nearest first.
+fn ancestors(skeleton: &Skeleton, joint: usize) -> impl Iterator<Item = usize> + '_ {
+    core::iter::successors(skeleton.parents()[joint], |&p| skeleton.parents()[p])
+}
+
+/// The one mapped joint that `joint`'s bone aims at: the nearest mapped descendants (reached
+/// through unmapped joints only), if there is exactly one.
+fn aim(skeleton: &Skeleton, source_of: &[Option<usize>], joint: usize) -> Option<usize> {
+    let mut found = None;
+    let mut stack: Vec<usize> = skeleton.children(joint).collect();
+    while let Some(c) = stack.pop() {
+        if source_of[c].is_some() {
+            if found.replace(c).is_some() {
+                return None;
+            }
+        } else {
+            stack.extend(skeleton.children(c));
+        }
+    }
+    found
+}
+
+/// The rotation `G` minimising `Σ ‖G (a_i − ā) − (b_i − b̄)‖²` (Horn 1987): the eigenvector of
+/// the largest eigenvalue of a 4 × 4 symmetric matrix built from the cross-covariance. Fewer
+/// than three pairs, or points that do not span a plane, leave it undetermined about some
+/// axis; the result is then still a rotation, the one the eigensolver settles on.
+fn best_rotation(pairs: &[(Vec3, Vec3)]) -> Quat {
+    if pairs.len() < 2 {
+        return Quat::IDENTITY;
+    }
+    let n = pairs.len() as f32;
+    let (ca, cb) = pairs
+        .iter()
+        .fold((Vec3::ZERO, Vec3::ZERO), |(a, b), (p, q)| (a + *p, b + *q));
+    let (ca, cb) = (ca / n, cb / n);
+    // Cross-covariance S[i][j] = Σ a_i b_j, in f64 for the eigensolver.
+    let mut s = [[0.0f64; 3]; 3];
+    for (p, q) in pairs {
+        let (a, b) = ((*p - ca).to_array(), (*q - cb).to_array());
+        for i in 0..3 {
+            for j in 0..3 {
+                s[i][j] += f64::from(a[i]) * f64::from(b[j]);
+            }
+        }
+    }
+    let [[sxx, sxy, sxz], [syx, syy, syz], [szx, szy, szz]] = s;
+    // Horn's N, for the quaternion (w, x, y, z).
+    let m = [
+        [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
+        [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
+        [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
+        [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
+    ];
+    let (values, vectors) = jacobi_eigen(m);
+    let best = (0..4)
+        .max_by(|&i, &j| values[i].total_cmp(&values[j]))
+        .unwrap_or(0);
+    let v = [0, 1, 2, 3].map(|r| vectors[r][best]);
+    let q = Quat::from_xyzw(v[1] as f32, v[2] as f32, v[3] as f32, v[0] as f32);
+    if q.is_finite() && q.length() > 0.5 {
+        q.normalize()
+    } else {
+        Quat::IDENTITY
+    }
+}
+
+/// Eigenvalues and eigenvectors (columns) of a symmetric 4 × 4 matrix by cyclic Jacobi sweeps.
+fn jacobi_eigen(mut a: [[f64; 4]; 4]) -> ([f64; 4], [[f64; 4]; 4]) {
+    let mut v = [[0.0f64; 4]; 4];
+    for (i, row) in v.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for _ in 0..64 {
+        let off: f64 = (0..4)
+            .flat_map(|i| (0..4).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i][j] * a[i][j])
+            .sum();
+        let scale: f64 = (0..4).map(|i| a[i][i] * a[i][i]).sum::<f64>() + off;
+        if off <= 1e-24 * scale.max(f64::MIN_POSITIVE) {
+            break;
+        }
+        for p in 0..3 {
+            for q in p + 1..4 {
+                if a[p][q] == 0.0 {
+                    continue;
+                }
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + libm::sqrt(theta * theta + 1.0));
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / libm::sqrt(t * t + 1.0);
+                let s = t * c;
+                for row in &mut a {
+                    let (akp, akq) = (row[p], row[q]);
+                    row[p] = c * akp - s * akq;
+                    row[q] = s * akp + c * akq;
+                }
+                let (row_p, row_q) = (a[p], a[q]);
+                for (k, (apk, aqk)) in row_p.into_iter().zip(row_q).enumerate() {
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                for row in &mut v {
+                    let (vkp, vkq) = (row[p], row[q]);
+                    row[p] = c * vkp - s * vkq;
+                    row[q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+    ([a[0][0], a[1][1], a[2][2], a[3][3]], v)
+}
