@@ -1,20 +1,13 @@
 //! `trainer synth --joint-map`: the flag needs a motion file, and a malformed map is refused
 //! with its file named and no capture written.
 
-use std::process::Command;
-
 use skinfield_formats::shared_data::shared_data_dir;
 
+mod common;
+
 fn synth(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
-        .arg("synth")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, _, err) = common::trainer(&[&["synth"], args].concat());
+    (code, err)
 }
 
 #[test]

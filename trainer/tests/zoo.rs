@@ -2,20 +2,55 @@
 //! tiny capture: the table and the JSON name the character, its counts and its clip split, and
 //! carry the four rows with absolute, relative and worst-vertex figures. Plus the refusals.
 
-use std::process::Command;
+use std::path::Path;
 
 use skinfield_formats::shared_data::shared_data_dir;
 
+mod common;
+
 fn zoo(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_trainer"))
-        .arg("zoo")
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, _, err) = common::trainer(&[&["zoo"], args].concat());
+    (code, err)
+}
+
+/// `trainer zoo` of one character with one iteration per phase on a capture of two 40² cameras
+/// and one frame per clip, into `out` with the configuration file `config`, plus `extra`.
+fn tiny_zoo(
+    character: &str,
+    out: &Path,
+    config: &Path,
+    data: &Path,
+    extra: &[&str],
+) -> (i32, String) {
+    let mut args = vec![
+        "--out",
+        out.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+        "--characters",
+        character,
+        "--warm-start",
+        "1",
+        "--iterations",
+        "1",
+        "--static-iterations",
+        "1",
+        "--cameras",
+        "2",
+        "--resolution",
+        "40",
+        "--train-frames",
+        "1",
+        "--test-frames",
+        "1",
+        "--samples",
+        "500",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    zoo(&args)
 }
 
 #[test]
@@ -35,35 +70,13 @@ fn zoo_writes_one_table_with_the_robot() {
         r#"{"weights": {"skinning": 0, "partwise": 0}, "refuse_worse_than_initial": false}"#,
     )
     .unwrap();
-    let (code, err) = zoo(&[
-        "--out",
-        out.to_str().unwrap(),
-        "--doc",
-        doc.to_str().unwrap(),
-        "--config",
-        config.to_str().unwrap(),
-        "--data",
-        data.to_str().unwrap(),
-        "--characters",
+    let (code, err) = tiny_zoo(
         "robot",
-        "--warm-start",
-        "1",
-        "--iterations",
-        "1",
-        "--static-iterations",
-        "1",
-        "--cameras",
-        "2",
-        "--resolution",
-        "40",
-        "--train-frames",
-        "1",
-        "--test-frames",
-        "1",
-        "--samples",
-        "500",
-        "--quiet",
-    ]);
+        &out,
+        &config,
+        &data,
+        &["--doc", doc.to_str().unwrap()],
+    );
     assert_eq!(code, 0, "{err}");
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("zoo.json")).unwrap()).unwrap();
@@ -133,33 +146,7 @@ fn zoo_drives_the_peasant_with_the_witchs_clips_retargeted() {
     let out = tmp.path().join("zoo");
     let config = tmp.path().join("config.json");
     std::fs::write(&config, r#"{"refuse_worse_than_initial": false}"#).unwrap();
-    let (code, err) = zoo(&[
-        "--out",
-        out.to_str().unwrap(),
-        "--config",
-        config.to_str().unwrap(),
-        "--data",
-        data.to_str().unwrap(),
-        "--characters",
-        "peasant",
-        "--warm-start",
-        "1",
-        "--iterations",
-        "1",
-        "--static-iterations",
-        "1",
-        "--cameras",
-        "2",
-        "--resolution",
-        "40",
-        "--train-frames",
-        "1",
-        "--test-frames",
-        "1",
-        "--samples",
-        "500",
-        "--quiet",
-    ]);
+    let (code, err) = tiny_zoo("peasant", &out, &config, &data, &[]);
     assert_eq!(code, 0, "{err}");
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("zoo.json")).unwrap()).unwrap();

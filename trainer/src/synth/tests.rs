@@ -430,54 +430,110 @@ fn witch_gltf_capture_loads_back_and_its_ground_truth_is_not_lbs() {
     ));
 }
 
+/// A capture of the shared character `character` moved by `motion` (both under `data`)
+/// through the joint map `map` of `joint-maps/`, `frames` (training, test) per clip, and the map.
+fn retargeted_capture(
+    data: &Path,
+    (character, motion, map): (&str, &str, &str),
+    (train, test): (&str, &str),
+    frames: (usize, usize),
+    in_place: bool,
+) -> (tempfile::TempDir, Capture, JointMap) {
+    let map = JointMap::read(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("joint-maps")
+            .join(map),
+    )
+    .unwrap();
+    let source = GltfSource {
+        character: data.join(character),
+        motion: Some(data.join(motion)),
+        joint_map: Some(map.clone()),
+        in_place,
+        train_clips: vec![train.into()],
+        test_clips: vec![test.into()],
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let config = SynthConfig {
+        train_frames_per_clip: frames.0,
+        test_frames_per_clip: frames.1,
+        ..SynthConfig::tiny()
+    };
+    synthesize_gltf(dir.path(), &config, &source).unwrap();
+    let cap = load_capture(dir.path()).unwrap();
+    let first_test = frames.0;
+    let inside = cap.load_mask(0, first_test).unwrap().inside;
+    assert!(
+        inside.iter().filter(|&&m| m).count() > 50,
+        "{character} in view"
+    );
+    (dir, cap, map)
+}
+
+/// Forward kinematics of `pose`.
+fn world_of(skeleton: &skinfield_formats::Skeleton, pose: &skinfield_formats::Pose) -> Vec<Mat4> {
+    let mut w = vec![Mat4::IDENTITY; skeleton.len()];
+    skeleton.world_matrices(pose, &mut w).unwrap();
+    w
+}
+
+/// The world position of the joint named `name`.
+fn joint_at(skeleton: &skinfield_formats::Skeleton, world: &[Mat4], name: &str) -> Vec3 {
+    world[skeleton.find(name).unwrap()].w_axis.truncate()
+}
+
+/// A bone as the names of the joints at its two ends.
+type Bone<'a> = (&'a str, &'a str);
+
+/// Every bone of the target points within 1° of its source bone turned by `frame`.
+fn assert_bones_follow(
+    (target, target_world): (&skinfield_formats::Skeleton, &[Mat4]),
+    (source, source_world): (&skinfield_formats::Skeleton, &[Mat4]),
+    frame: Quat,
+    bones: &[(Bone<'_>, Bone<'_>)],
+    what: &str,
+) {
+    for &((ta, tb), (sa, sb)) in bones {
+        let got =
+            (joint_at(target, target_world, tb) - joint_at(target, target_world, ta)).normalize();
+        let want = frame
+            * (joint_at(source, source_world, sb) - joint_at(source, source_world, sa)).normalize();
+        assert!(
+            got.angle_between(want) < 1f32.to_radians(),
+            "{what}, {ta}: {got} against {want}"
+        );
+    }
+}
+
 #[test]
 fn a_motion_from_another_rig_is_retargeted_through_a_joint_map() {
     let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
         return;
     };
-    let witch = data.join("quaternius-witch/Witch.gltf");
-    let map_file =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("joint-maps/quaternius-to-ue-mannequin.json");
-    let map = JointMap::read(&map_file).unwrap();
     // The peasant has no clips; the Witch's drive it (other names, proportions, rest pose).
-    let source = GltfSource {
-        character: data.join("quaternius-female-peasant/Female_Peasant.gltf"),
-        motion: Some(witch.clone()),
-        joint_map: Some(map.clone()),
-        in_place: false,
-        train_clips: vec!["Walk".into()],
-        test_clips: vec!["Wave".into()],
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let config = SynthConfig {
-        train_frames_per_clip: 2,
-        test_frames_per_clip: 2,
-        ..SynthConfig::tiny()
-    };
-    synthesize_gltf(dir.path(), &config, &source).unwrap();
-    let cap = load_capture(dir.path()).unwrap();
+    let (dir, cap, map) = retargeted_capture(
+        &data,
+        (
+            "quaternius-female-peasant/Female_Peasant.gltf",
+            "quaternius-witch/Witch.gltf",
+            "quaternius-to-ue-mannequin.json",
+        ),
+        ("Walk", "Wave"),
+        (2, 2),
+        false,
+    );
     assert_eq!(
         (cap.skeleton.len(), cap.template.vertex_count()),
         (65, 10184)
     );
-    let mask = cap.load_mask(0, 3).unwrap();
-    assert!(mask.inside.iter().filter(|&&m| m).count() > 50);
     // Each frame's mapped bones point where the Witch's do at the same clip time, in the
     // peasant's frame: the retargeting, checked end to end on the two real rigs.
+    let witch = data.join("quaternius-witch/Witch.gltf");
     let doc = skinfield_formats::gltf_io::load_gltf(&witch).unwrap();
     let skin = doc.largest_skin().unwrap();
     let frame = skinfield_formats::Retarget::new(&skin.skeleton, &cap.skeleton, &map.pairs)
         .unwrap()
         .frame();
-    let world = |skeleton: &skinfield_formats::Skeleton, pose: &skinfield_formats::Pose| {
-        let mut w = vec![Mat4::IDENTITY; skeleton.len()];
-        skeleton.world_matrices(pose, &mut w).unwrap();
-        w
-    };
-    let bone = |skeleton: &skinfield_formats::Skeleton, w: &[Mat4], a: &str, b: &str| {
-        let at = |n: &str| w[skeleton.find(n).unwrap()].w_axis.truncate();
-        (at(b) - at(a)).normalize()
-    };
     let bones = [
         (("spine_01", "spine_02"), ("Abdomen", "Torso")),
         (("upperarm_l", "lowerarm_l"), ("UpperArm.L", "LowerArm.L")),
@@ -491,30 +547,31 @@ fn a_motion_from_another_rig_is_retargeted_through_a_joint_map() {
     {
         let clip = doc.clip(clip).unwrap();
         let t = clip.duration_s * (i as f32 + 0.5) / 2.0;
-        let (p, w) = (
-            world(&cap.skeleton, &cap.poses[k]),
-            world(&skin.skeleton, &clip.sample(skin, t)),
+        assert_bones_follow(
+            (&cap.skeleton, &world_of(&cap.skeleton, &cap.poses[k])),
+            (
+                &skin.skeleton,
+                &world_of(&skin.skeleton, &clip.sample(skin, t)),
+            ),
+            frame,
+            &bones,
+            &format!("frame {k}"),
         );
-        for ((pa, pb), (wa, wb)) in bones {
-            let (got, want) = (
-                bone(&cap.skeleton, &p, pa, pb),
-                frame * bone(&skin.skeleton, &w, wa, wb),
-            );
-            assert!(
-                got.angle_between(want) < 1f32.to_radians(),
-                "frame {k}, {pa}: {got} against {want}"
-            );
-        }
     }
     // A map without a motion file, and one naming a joint neither rig has, are refused with
     // the map's origin in the message.
-    let alone = GltfSource {
+    let source = GltfSource {
+        character: data.join("quaternius-female-peasant/Female_Peasant.gltf"),
         motion: None,
-        ..source.clone()
+        joint_map: Some(map.clone()),
+        in_place: false,
+        train_clips: vec!["Walk".into()],
+        test_clips: vec!["Wave".into()],
     };
-    let e = synthesize_gltf(dir.path(), &config, &alone).unwrap_err();
+    let config = SynthConfig::tiny();
+    let e = synthesize_gltf(dir.path(), &config, &source).unwrap_err();
     assert!(
-        matches!(&e, SynthError::JointMap { path, .. } if *path == map_file),
+        matches!(&e, SynthError::JointMap { path, .. } if *path == map.origin),
         "{e}"
     );
     let mut wrong = map.clone();
@@ -523,8 +580,9 @@ fn a_motion_from_another_rig_is_retargeted_through_a_joint_map() {
         dir.path(),
         &config,
         &GltfSource {
+            motion: Some(witch),
             joint_map: Some(wrong),
-            ..source.clone()
+            ..source
         },
     )
     .unwrap_err()
@@ -540,64 +598,34 @@ fn bvh_motion_capture_drives_the_makehuman_body_in_place() {
     let Some(data) = skinfield_formats::shared_data::shared_data_dir() else {
         return;
     };
-    let map = JointMap::read(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("joint-maps/cmu-bvh-to-makehuman.json"),
-    )
-    .unwrap();
-    let mocap = data.join("mocap-cmu");
-    let source = GltfSource {
-        character: data.join("makehuman-hm08"),
-        motion: Some(mocap.clone()),
-        joint_map: Some(map.clone()),
-        in_place: true,
-        train_clips: vec!["131_01".into()],
-        test_clips: vec!["jumping_jacks".into()],
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let config = SynthConfig {
-        train_frames_per_clip: 3,
-        test_frames_per_clip: 2,
-        ..SynthConfig::tiny()
-    };
-    synthesize_gltf(dir.path(), &config, &source).unwrap();
-    let cap = load_capture(dir.path()).unwrap();
+    let (dir, cap, map) = retargeted_capture(
+        &data,
+        ("makehuman-hm08", "mocap-cmu", "cmu-bvh-to-makehuman.json"),
+        ("131_01", "jumping_jacks"),
+        (3, 2),
+        true,
+    );
     assert_eq!(
         (cap.skeleton.len(), cap.template.vertex_count()),
         (163, 13380)
     );
-    assert!(
-        cap.load_mask(0, 4)
-            .unwrap()
-            .inside
-            .iter()
-            .filter(|&&m| m)
-            .count()
-            > 50
-    );
-    let world = |skeleton: &skinfield_formats::Skeleton, pose: &skinfield_formats::Pose| {
-        let mut w = vec![Mat4::IDENTITY; skeleton.len()];
-        skeleton.world_matrices(pose, &mut w).unwrap();
-        w
-    };
-    let at = |s: &skinfield_formats::Skeleton, w: &[Mat4], n: &str| {
-        w[s.find(n).unwrap()].w_axis.truncate()
-    };
-    let rest = at(
+    let rest = joint_at(
         &cap.skeleton,
-        &world(&cap.skeleton, &cap.skeleton.bind_pose()),
+        &world_of(&cap.skeleton, &cap.skeleton.bind_pose()),
         "root",
     );
     let options = skinfield_formats::bvh::BvhOptions {
         unit_scale: skinfield_formats::bvh::CMU_UNIT_TO_METRES,
     };
-    let walk = skinfield_formats::bvh::load_bvh_with(mocap.join("131_01.bvh"), &options).unwrap();
+    let walk =
+        skinfield_formats::bvh::load_bvh_with(data.join("mocap-cmu/131_01.bvh"), &options).unwrap();
     let frame = skinfield_formats::Retarget::new(&walk.skeleton, &cap.skeleton, &map.pairs)
         .unwrap()
         .frame();
     for i in 0..3 {
-        let w = world(&cap.skeleton, &cap.poses[i]);
+        let w = world_of(&cap.skeleton, &cap.poses[i]);
         // In place: the hips never leave the spot above their rest position.
-        let hips = at(&cap.skeleton, &w, "root");
+        let hips = joint_at(&cap.skeleton, &w, "root");
         assert!(
             (hips.x - rest.x).abs() < 1e-4 && (hips.z - rest.z).abs() < 1e-4,
             "frame {i}: hips at {hips}, rest {rest}"
@@ -605,40 +633,44 @@ fn bvh_motion_capture_drives_the_makehuman_body_in_place() {
         // The arms and legs point where the actor's did at that frame.
         let t = walk.duration_s() * (i as f32 + 0.5) / 3.0;
         let k = (t / walk.frame_time) as usize;
-        let b = world(&walk.skeleton, &walk.poses[k]);
-        for ((ta, tb), (sa, sb)) in [
-            (
-                ("upperarm01.L", "lowerarm01.L"),
-                ("LeftShoulder", "LeftElbow"),
-            ),
-            (("upperleg01.R", "lowerleg01.R"), ("RightHip", "RightKnee")),
-            (("lowerleg01.L", "foot.L"), ("LeftKnee", "LeftAnkle")),
-        ] {
-            let got = (at(&cap.skeleton, &w, tb) - at(&cap.skeleton, &w, ta)).normalize();
-            let want =
-                frame * (at(&walk.skeleton, &b, sb) - at(&walk.skeleton, &b, sa)).normalize();
-            assert!(
-                got.angle_between(want) < 1f32.to_radians(),
-                "frame {i}, {ta}: {got} against {want}"
-            );
-        }
+        assert_bones_follow(
+            (&cap.skeleton, &w),
+            (&walk.skeleton, &world_of(&walk.skeleton, &walk.poses[k])),
+            frame,
+            &[
+                (
+                    ("upperarm01.L", "lowerarm01.L"),
+                    ("LeftShoulder", "LeftElbow"),
+                ),
+                (("upperleg01.R", "lowerleg01.R"), ("RightHip", "RightKnee")),
+                (("lowerleg01.L", "foot.L"), ("LeftKnee", "LeftAnkle")),
+            ],
+            &format!("frame {i}"),
+        );
     }
     // BVH motion needs a joint map; in place needs one too.
-    for bad in [
-        GltfSource {
-            joint_map: None,
-            in_place: false,
-            ..source.clone()
-        },
-        GltfSource {
-            motion: Some(data.join("quaternius-witch/Witch.gltf")),
-            joint_map: None,
-            ..source.clone()
-        },
+    let source = GltfSource {
+        character: data.join("makehuman-hm08"),
+        motion: Some(data.join("mocap-cmu")),
+        joint_map: None,
+        in_place: false,
+        train_clips: vec!["131_01".into()],
+        test_clips: vec!["jumping_jacks".into()],
+    };
+    for (bad, field) in [
+        (source.clone(), "joint_map"),
+        (
+            GltfSource {
+                motion: Some(data.join("quaternius-witch/Witch.gltf")),
+                in_place: true,
+                ..source
+            },
+            "in_place",
+        ),
     ] {
-        let e = synthesize_gltf(dir.path(), &config, &bad).unwrap_err();
+        let e = synthesize_gltf(dir.path(), &SynthConfig::tiny(), &bad).unwrap_err();
         assert!(
-            matches!(e, SynthError::Config { field, .. } if field == "joint_map" || field == "in_place"),
+            matches!(e, SynthError::Config { field: f, .. } if f == field),
             "{e}"
         );
     }
