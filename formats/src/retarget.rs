@@ -112,54 +112,53 @@ impl Retarget {
         }
         let (source_rest_rotation, source_rest_position) = world_rest(source);
         let (target_rest_rotation, target_rest_position) = world_rest(target);
-        let mut translates = vec![false; target.len()];
-        for t in 0..target.len() {
-            translates[t] =
-                source_of[t].is_some() && !ancestors(target, t).any(|a| source_of[a].is_some());
-        }
-        let aims: Vec<Option<usize>> = (0..target.len())
-            .map(|t| aim(target, &source_of, t))
+        let translates: Vec<bool> = (0..target.len())
+            .map(|t| {
+                source_of[t].is_some() && !ancestors(target, t).any(|a| source_of[a].is_some())
+            })
             .collect();
-        let pairs: Vec<(usize, usize)> = source_of
+        // Per target joint with an aim: its rest bone and the corresponding source bone.
+        let bones: Vec<Option<(Vec3, Vec3)>> = (0..target.len())
+            .map(|t| {
+                let s = source_of[t]?;
+                let a = aim(target, &source_of, t)?;
+                let sa = source_of[a]?;
+                Some((
+                    target_rest_position[a] - target_rest_position[t],
+                    source_rest_position[sa] - source_rest_position[s],
+                ))
+            })
+            .collect();
+        let pairs: Vec<(Vec3, Vec3)> = source_of
             .iter()
             .enumerate()
-            .filter_map(|(t, s)| s.map(|s| (s, t)))
+            .filter_map(|(t, s)| s.map(|s| (source_rest_position[s], target_rest_position[t])))
             .collect();
-        let frame = best_rotation(
-            &pairs
-                .iter()
-                .map(|&(s, t)| (source_rest_position[s], target_rest_position[t]))
-                .collect::<Vec<_>>(),
-        );
-        let (mut source_length, mut target_length) = (0.0f32, 0.0f32);
-        for (t, aim) in aims.iter().enumerate() {
-            if let (Some(a), Some(s)) = (*aim, source_of[t])
-                && let Some(sa) = source_of[a]
-            {
-                source_length += (source_rest_position[sa] - source_rest_position[s]).length();
-                target_length += (target_rest_position[a] - target_rest_position[t]).length();
-            }
-        }
+        let frame = best_rotation(&pairs);
+        let (target_length, source_length) = bones
+            .iter()
+            .flatten()
+            .fold((0.0f32, 0.0f32), |(t, s), (bt, bs)| {
+                (t + bt.length(), s + bs.length())
+            });
         let scale = if source_length > 0.0 && target_length > 0.0 {
             target_length / source_length
         } else {
             1.0
         };
-        let target_aligned_rest = (0..target.len())
-            .map(|t| {
-                let align = match (aims[t], source_of[t]) {
-                    (Some(a), Some(s)) => {
-                        let sa = source_of[a].unwrap_or(s);
-                        let from = target_rest_position[a] - target_rest_position[t];
-                        let to = frame * (source_rest_position[sa] - source_rest_position[s]);
-                        match (from.try_normalize(), to.try_normalize()) {
-                            (Some(from), Some(to)) => Quat::from_rotation_arc(from, to),
-                            _ => Quat::IDENTITY,
-                        }
-                    }
-                    _ => Quat::IDENTITY,
-                };
-                (align * target_rest_rotation[t]).normalize()
+        let target_aligned_rest = bones
+            .iter()
+            .zip(&target_rest_rotation)
+            .map(|(bone, &rest)| {
+                let align = bone
+                    .and_then(|(from, to)| {
+                        Some(Quat::from_rotation_arc(
+                            from.try_normalize()?,
+                            (frame * to).try_normalize()?,
+                        ))
+                    })
+                    .unwrap_or(Quat::IDENTITY);
+                (align * rest).normalize()
             })
             .collect();
         Ok(Self {
