@@ -8,6 +8,11 @@
 //! one floating-point operation of the measured work, so `Gelem/s` reads as GFLOP/s.
 //! `fused_forward_backward_pose_per_row/2t` feeds the same poses per row (`[F, V, 3J]`, the
 //! input of pose locality's training step) against `fused_forward_backward/2t`.
+//! `skinnet_pose_locality_4x2500` compares pose locality's input written out as rows through a
+//! full output layer with the same input kept as [`LocalPoses`] and the output layer over the
+//! candidates, at 24 and 163 joints.
+
+use std::sync::Arc;
 
 use candle_core::{Device, Tensor};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
@@ -19,7 +24,9 @@ use skinfield_runtime::{BoundMesh, FrameState, Scratch, SkinNetModel, WeightsJob
 use skinfield_trainer::losses::lbs::{lbs, rest_homogeneous, skinning_tensor};
 use skinfield_trainer::optim::{Adam, AdamConfig};
 use skinfield_trainer::skinnet::export::to_skf_model;
-use skinfield_trainer::skinnet::{Activation, Backend, TrainableSkinNet, position_inputs_tensor};
+use skinfield_trainer::skinnet::{
+    Activation, Backend, LocalPoses, TrainableSkinNet, position_inputs_tensor,
+};
 
 const JOINTS: u32 = 24;
 const FRAMES: usize = 4;
@@ -234,5 +241,91 @@ fn mlp(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, step, mlp);
+/// Pose locality's input (a pose per row: the frame's features for 8 candidate joints per
+/// vertex, a donor's for the rest, drawn from 64 donor poses) through the fused op's forward
+/// and backward, masked to the candidates as in training, two ways: `dense_rows` writes it out
+/// as `[F, V, 3J]` rows through a full output layer (`with_structure(false)`: the training step
+/// before 2026-12-07), `structured` as the [`LocalPoses`] structure with the output layer over
+/// the candidates, where each pays (the default). The donors are drawn inside the loop for
+/// both, as the training step does every iteration. At the built-in character's 24 joints
+/// (where the structure does not pay and both run the dense path) and the MakeHuman body's 163.
+fn local_poses(c: &mut Criterion) {
+    let mut group = c.benchmark_group("skinnet_pose_locality_4x2500");
+    group.sample_size(10);
+    let pool2 = pool(2);
+    for joints in [24u32, 163] {
+        let j = joints as usize;
+        let config = ModelConfig::paper_architecture(joints, [-1.0; 3], [1.0; 3]);
+        let q = config.pose_width();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let points: Vec<Vec3> = (0..POINTS)
+            .map(|_| Vec3::new(rng.random(), rng.random(), rng.random()))
+            .collect();
+        let encoded = position_inputs_tensor(&config, &points, &Device::Cpu).unwrap();
+        let poses: Vec<f32> = (0..(FRAMES + 64) * q)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let (own, donors) = poses.split_at(FRAMES * q);
+        let own: Vec<&[f32]> = own.chunks_exact(q).collect();
+        let donors: Vec<&[f32]> = donors.chunks_exact(q).collect();
+        let lists: Vec<Vec<u16>> = (0..POINTS)
+            .map(|_| {
+                let mut l: Vec<u16> = (0..joints as u16).collect();
+                for i in 0..8 {
+                    let k = rng.random_range(i..j);
+                    l.swap(i, k);
+                }
+                let mut l = l[..8].to_vec();
+                l.sort_unstable();
+                l
+            })
+            .collect();
+        let mut relevant = vec![false; POINTS * j];
+        for (v, l) in lists.iter().enumerate() {
+            for &i in l {
+                relevant[v * j + i as usize] = true;
+            }
+        }
+        let mask = Tensor::from_vec(
+            skinfield_trainer::candidates::additive_mask(&lists, j),
+            (POINTS, j),
+            &Device::Cpu,
+        )
+        .unwrap();
+        let (net, _varmap) = TrainableSkinNet::seeded(config, 7, 1.0).unwrap();
+        let dense = net.clone().with_structure(false);
+        let draw = |seed: u64| {
+            LocalPoses::draw(
+                &own,
+                &donors,
+                &relevant,
+                j,
+                &mut ChaCha8Rng::seed_from_u64(seed),
+            )
+            .unwrap()
+        };
+        group.bench_function(format!("dense_rows/J{joints}/2t"), |b| {
+            b.iter(|| {
+                pool2.install(|| {
+                    let rows = Tensor::from_vec(draw(1).rows(), (FRAMES, POINTS, q), &Device::Cpu)
+                        .unwrap();
+                    let w = dense.forward_masked(&encoded, &rows, Some(&mask)).unwrap();
+                    w.sum_all().unwrap().backward().unwrap()
+                })
+            });
+        });
+        group.bench_function(format!("structured/J{joints}/2t"), |b| {
+            b.iter(|| {
+                pool2.install(|| {
+                    let local = Arc::new(draw(1));
+                    let w = net.forward_local(&encoded, &local, Some(&mask)).unwrap();
+                    w.sum_all().unwrap().backward().unwrap()
+                })
+            });
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, step, mlp, local_poses);
 criterion_main!(benches);

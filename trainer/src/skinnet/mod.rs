@@ -12,6 +12,7 @@
 
 pub mod export;
 pub mod fused;
+pub mod local_poses;
 pub mod softplus;
 
 use std::sync::Arc;
@@ -23,6 +24,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{ModelConfig, Net, SkfView};
 
+pub use local_poses::{LocalPoses, LocalPosesError};
 pub use softplus::{softmax_last, softplus, softplus_composite};
 
 /// How the forward pass (and so the backward pass) is computed.
@@ -92,6 +94,8 @@ pub struct TrainableSkinNet {
     config: ModelConfig,
     layers: Vec<WnLinear>,
     backend: Backend,
+    /// Whether the fused op uses the structure of candidate masks and pose locality's input.
+    structured: bool,
     /// The fused op's architecture, SIMD kernel and buffer pool (shared by clones).
     fused: Arc<fused::FusedContext>,
 }
@@ -115,6 +119,7 @@ impl TrainableSkinNet {
             config,
             layers,
             backend: Backend::default(),
+            structured: true,
             fused: Arc::new(fused::FusedContext::new(config)),
         })
     }
@@ -146,6 +151,17 @@ impl TrainableSkinNet {
     #[must_use]
     pub fn with_backend(mut self, backend: Backend) -> Self {
         self.backend = backend;
+        self
+    }
+
+    /// Whether the fused op may use the structure of what it is fed where that pays (the
+    /// default): candidate masks (the output layer computes each point's candidates alone) and
+    /// pose locality's [`LocalPoses`] (multiplied without writing the rows out). Off, it
+    /// multiplies dense rows through a full output layer, as before 2026-12-07: the reference
+    /// the bench measures against. The values agree up to the order of summation.
+    #[must_use]
+    pub fn with_structure(mut self, structured: bool) -> Self {
+        self.structured = structured;
         self
     }
 
@@ -224,6 +240,7 @@ impl TrainableSkinNet {
                     positions,
                     poses,
                     mask,
+                    self.structured,
                 );
             }
             Backend::Fused => Activation::SoftplusOp,
@@ -276,6 +293,55 @@ impl TrainableSkinNet {
             None => logits,
         };
         softmax_last(&logits)?.reshape((f, v, j))
+    }
+}
+
+impl TrainableSkinNet {
+    /// [`TrainableSkinNet::forward_masked`] with a pose per row given as pose locality's
+    /// [`LocalPoses`] (`[F, V, 3J]` in structure): the fused op multiplies the structure
+    /// ([`local_poses`]) where that pays ([`LocalPoses::worth_structure`]); otherwise, and in
+    /// the candle graph, the network gets the rows written out.
+    pub fn forward_local(
+        &self,
+        positions: &Tensor,
+        local: &Arc<LocalPoses>,
+        mask: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        let (v, p) = positions.dims2()?;
+        let q = 3 * local.joints();
+        if local.vertices() != v || q != self.config.pose_width() {
+            candle_core::bail!(
+                "SkinNet local poses for {} vertices × {q} features, expected {v} × {}",
+                local.vertices(),
+                self.config.pose_width()
+            );
+        }
+        if self.backend == Backend::Fused
+            && positions.dtype() == DType::F32
+            && self.structured
+            && local.worth_structure()
+        {
+            if p != self.config.position_width() {
+                candle_core::bail!(
+                    "SkinNet position width {p}, expected {}",
+                    self.config.position_width()
+                );
+            }
+            return fused::forward_local(
+                &self.fused,
+                &self.packed_parameters()?,
+                positions,
+                local,
+                mask,
+            );
+        }
+        let rows = Tensor::from_vec(
+            local.rows(),
+            (local.frame_count(), v, q),
+            positions.device(),
+        )?
+        .to_dtype(positions.dtype())?;
+        self.forward_masked(positions, &rows, mask)
     }
 }
 

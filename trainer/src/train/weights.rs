@@ -56,10 +56,9 @@ impl Trainer {
             .collect();
         let phase = PHASE_POSE_LOCALITY_OFFSET + PHASE_IMAGE;
         let mut rng = frame_rng(self.config.seed, phase, self.done);
-        let v = relevant.len() / j.max(1);
-        let local = pose_locality::local_pose_rows(&poses, &pool, &relevant, j, &mut rng);
-        let local = Tensor::from_vec(local, (frames.len(), v, 3 * j), &Device::Cpu)?;
-        Ok(net.forward_masked(&rows, &local, Some(&mask))?)
+        let local = pose_locality::LocalPoses::draw(&poses, &pool, &relevant, j, &mut rng)
+            .map_err(|e| TrainError::Data(format!("pose locality: {e}")))?;
+        Ok(net.forward_local(&rows, &Arc::new(local), Some(&mask))?)
     }
 
     /// The concatenated pose features of training frames `frames`.

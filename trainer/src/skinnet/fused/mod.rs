@@ -30,6 +30,7 @@
 
 pub(crate) mod gemm;
 mod pass;
+mod sparse;
 
 use std::sync::{Arc, Mutex};
 
@@ -37,7 +38,11 @@ use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor, bail};
 use skinfield_formats::skf::{ModelConfig, Net};
 use skinfield_runtime::Kernel;
 
+use super::LocalPoses;
+
 pub(crate) use pass::Activations;
+use sparse::LogitMask;
+pub(crate) use sparse::worth_sparse;
 
 /// Where each layer's `v`, `g` and `b` sit in the flat parameter vector: layer by layer, `v`
 /// (`out × in`, row-major), then `g` (`out`), then `b` (`out`).
@@ -164,9 +169,12 @@ impl FusedContext {
 /// The custom op: `(params [P], positions [V, Pw], poses [F, Qw] or [F, V, Qw]) → weights
 /// [F, V, J]`, with an
 /// optional additive mask `[V, J]` (0 on candidate joints, −∞ elsewhere) applied to the logits.
+/// With `local`, the pose input is that structure and the third input is its frames' poses
+/// `[F, Q]` (only their shape is read).
 struct FusedSkinNet {
     context: Arc<FusedContext>,
-    mask: Option<Vec<f32>>,
+    mask: Option<LogitMask>,
+    local: Option<Arc<LocalPoses>>,
     saved: Mutex<Option<Activations>>,
 }
 
@@ -206,6 +214,40 @@ fn f32_data<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> 
     }
 }
 
+impl FusedSkinNet {
+    /// The pose input of `F` frames of `V` vertices: the structure when the op has one (checked
+    /// against those counts), else the third input's data.
+    fn pose_input<'a>(
+        &'a self,
+        data: &'a [f32],
+        per_row: bool,
+        frames: usize,
+        vertices: usize,
+    ) -> Result<pass::Poses<'a>> {
+        Ok(match &self.local {
+            Some(local) => {
+                if per_row
+                    || local.frame_count() != frames
+                    || local.vertices() != vertices
+                    || 3 * local.joints() != self.context.config.pose_width()
+                {
+                    bail!(
+                        "fused SkinNet: local poses of {} frames × {} vertices × {} joints for \
+                         {frames} frames × {vertices} vertices × {} pose features",
+                        local.frame_count(),
+                        local.vertices(),
+                        local.joints(),
+                        self.context.config.pose_width()
+                    );
+                }
+                pass::Poses::Local(local)
+            }
+            None if per_row => pass::Poses::PerRow(data),
+            None => pass::Poses::PerFrame(data),
+        })
+    }
+}
+
 impl CustomOp3 for FusedSkinNet {
     fn name(&self) -> &'static str {
         "fused-skinnet"
@@ -241,12 +283,12 @@ impl CustomOp3 for FusedSkinNet {
         if self
             .mask
             .as_ref()
-            .is_some_and(|m| m.len() != v * ctx.config.joint_count as usize)
+            .is_some_and(|m| m.additive.len() != v * ctx.config.joint_count as usize)
         {
             bail!("fused SkinNet: the mask is not [V, J]");
         }
-        let poses = pass::Poses::new(poses, per_row);
-        let acts = pass::forward(ctx, params, positions, poses, self.mask.as_deref(), f, v)?;
+        let poses = self.pose_input(poses, per_row, f, v)?;
+        let acts = pass::forward(ctx, params, positions, poses, self.mask.as_ref(), f, v)?;
         let weights = acts.output().to_vec();
         *self
             .saved
@@ -275,7 +317,7 @@ impl CustomOp3 for FusedSkinNet {
         let poses_v = poses.flatten_all()?.to_vec1::<f32>()?;
         let (v, _) = positions.dims2()?;
         let (f, _, per_row) = pose_shape(poses.shape(), v)?;
-        let poses_p = pass::Poses::new(&poses_v, per_row);
+        let poses_p = self.pose_input(&poses_v, per_row, f, v)?;
         let acts = match taken {
             Some(a) => a,
             None => pass::forward(
@@ -283,7 +325,7 @@ impl CustomOp3 for FusedSkinNet {
                 &params_v,
                 &positions_v,
                 poses_p,
-                self.mask.as_deref(),
+                self.mask.as_ref(),
                 f,
                 v,
             )?,
@@ -292,7 +334,15 @@ impl CustomOp3 for FusedSkinNet {
             .to_dtype(candle_core::DType::F32)?
             .flatten_all()?
             .to_vec1::<f32>()?;
-        let dparams = pass::backward(ctx, &params_v, &positions_v, poses_p, acts, &grad)?;
+        let dparams = pass::backward(
+            ctx,
+            &params_v,
+            &positions_v,
+            poses_p,
+            self.mask.as_ref(),
+            acts,
+            &grad,
+        )?;
         let n = dparams.len();
         Ok((
             Some(Tensor::from_vec(dparams, n, params.device())?),
@@ -300,6 +350,24 @@ impl CustomOp3 for FusedSkinNet {
             None,
         ))
     }
+}
+
+/// The additive logit mask `[V, J]`, if any, with its candidate lists where they pay and
+/// `structured` allows them.
+fn logit_mask(mask: Option<&Tensor>, structured: bool) -> Result<Option<LogitMask>> {
+    mask.map(|m| {
+        let joints = m.dims().last().copied().unwrap_or(0);
+        let values = m
+            .to_dtype(candle_core::DType::F32)?
+            .flatten_all()?
+            .to_vec1()?;
+        Ok(if structured {
+            LogitMask::new(values, joints)
+        } else {
+            LogitMask::dense(values)
+        })
+    })
+    .transpose()
 }
 
 /// SkinNet's weights `[F, V, J]` by the fused op: `params` is the flat parameter vector in
@@ -312,21 +380,43 @@ pub(crate) fn forward(
     positions: &Tensor,
     poses: &Tensor,
     mask: Option<&Tensor>,
+    structured: bool,
 ) -> Result<Tensor> {
-    let mask = match mask {
-        Some(m) => Some(
-            m.to_dtype(candle_core::DType::F32)?
-                .flatten_all()?
-                .to_vec1::<f32>()?,
-        ),
-        None => None,
-    };
+    let mask = logit_mask(mask, structured)?;
     params.apply_op3(
         &positions.contiguous()?,
         &poses.contiguous()?,
         FusedSkinNet {
             context: context.clone(),
             mask,
+            local: None,
+            saved: Mutex::new(None),
+        },
+    )
+}
+
+/// [`forward`] with a pose per row given in pose locality's structure ([`LocalPoses`]), which
+/// the op multiplies without writing the rows out.
+pub(crate) fn forward_local(
+    context: &Arc<FusedContext>,
+    params: &Tensor,
+    positions: &Tensor,
+    local: &Arc<LocalPoses>,
+    mask: Option<&Tensor>,
+) -> Result<Tensor> {
+    let mask = logit_mask(mask, true)?;
+    let frames = Tensor::from_slice(
+        local.frames(),
+        (local.frame_count(), 3 * local.joints()),
+        params.device(),
+    )?;
+    params.apply_op3(
+        &positions.contiguous()?,
+        &frames,
+        FusedSkinNet {
+            context: context.clone(),
+            mask,
+            local: Some(local.clone()),
             saved: Mutex::new(None),
         },
     )

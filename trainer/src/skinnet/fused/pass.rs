@@ -12,6 +12,11 @@ use skinfield_runtime::kernels::softplus_with_slope;
 
 use super::FusedContext;
 use super::gemm::{MatMut, MatRef, matmul};
+use super::sparse::{
+    LogitMask, local_pose_backward, local_pose_forward, sparse_output_backward,
+    sparse_output_forward,
+};
+use crate::skinnet::LocalPoses;
 
 /// Rows per parallel task of the elementwise passes.
 const CHUNK_ROWS: usize = 256;
@@ -32,18 +37,16 @@ fn flush(x: &mut [f32], tau: f32) {
     }
 }
 
-/// The pose input: one pose per frame (`[F, Q]`, broadcast over the frame's vertices) or one
-/// per row (`[F·V, Q]`, the pose-locality augmentation of the training step).
+/// The pose input: one pose per frame (broadcast over the frame's vertices), one per row, or one
+/// per row in pose locality's structure (the training step's input).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Poses<'a> {
-    data: &'a [f32],
-    per_row: bool,
-}
-
-impl<'a> Poses<'a> {
-    pub(crate) fn new(data: &'a [f32], per_row: bool) -> Self {
-        Self { data, per_row }
-    }
+pub(crate) enum Poses<'a> {
+    /// `[F, Q]`.
+    PerFrame(&'a [f32]),
+    /// `[F·V, Q]`.
+    PerRow(&'a [f32]),
+    /// `[F·V, Q]` as frames, donors and relevant joints ([`LocalPoses`]).
+    Local(&'a LocalPoses),
 }
 
 /// What the forward pass keeps for the backward pass.
@@ -98,6 +101,13 @@ fn effective_weights(ctx: &FusedContext, params: &[f32]) -> (Vec<Vec<f32>>, Vec<
         .unzip()
 }
 
+/// Whether the output layer is computed over the candidates alone: a sparse mask, and an output
+/// layer that reads only the last hidden layer.
+fn sparse_output(ctx: &FusedContext, mask: &LogitMask) -> bool {
+    let n = ctx.layout.layer_count();
+    mask.is_sparse() && n > 1 && !reads_input(ctx, n - 1)
+}
+
 /// Whether layer `i` reads the network input (positions and poses).
 fn reads_input(ctx: &FusedContext, i: usize) -> bool {
     i == 0 || i == ctx.config.skip_layer as usize
@@ -147,10 +157,10 @@ fn init_rows(
     );
     // One row per frame: the bias, plus with a pose per frame that frame's pose product.
     let mut per_frame: Vec<f32> = (0..frames).flat_map(|_| bias.iter().copied()).collect();
-    if !poses.per_row {
+    if let Poses::PerFrame(data) = poses {
         matmul(
             MatMut::row_major(&mut per_frame, frames, out),
-            MatRef::row_major(poses.data, frames, qw),
+            MatRef::row_major(data, frames, qw),
             wm.columns(prev + pw, qw).t(),
             true,
             1,
@@ -168,15 +178,18 @@ fn init_rows(
                 }
             }
         });
-    if poses.per_row {
-        let rows = frames * vertices;
-        matmul(
-            MatMut::row_major(z, rows, out),
-            MatRef::row_major(poses.data, rows, qw),
+    match poses {
+        Poses::PerFrame(_) => {}
+        Poses::PerRow(data) => matmul(
+            MatMut::row_major(z, frames * vertices, out),
+            MatRef::row_major(data, frames * vertices, qw),
             wm.columns(prev + pw, qw).t(),
             true,
             threads,
-        );
+        ),
+        Poses::Local(local) => {
+            local_pose_forward(z, w, inp, prev + pw, local, out, threads);
+        }
     }
 }
 
@@ -204,7 +217,7 @@ pub(crate) fn forward(
     params: &[f32],
     positions: &[f32],
     poses: Poses<'_>,
-    mask: Option<&[f32]>,
+    mask: Option<&LogitMask>,
     frames: usize,
     vertices: usize,
 ) -> Result<Activations> {
@@ -220,6 +233,14 @@ pub(crate) fn forward(
         let (out, inp) = ctx.layout.shape(i);
         let [_, _, rb] = ctx.layout.ranges(i);
         let mut z = ctx.pool.take(rows * out);
+        if let (Some(mask), Some(h)) = (mask, hidden.last())
+            && i + 1 == n
+            && sparse_output(ctx, mask)
+        {
+            sparse_output_forward(&mut z, h, w, &params[rb], mask, out, inp, vertices);
+            output = z;
+            break;
+        }
         init_rows(
             ctx,
             i,
@@ -264,7 +285,7 @@ pub(crate) fn forward(
                 // Non-candidate logits become −∞: their weights are exactly 0 and their
                 // gradients too (the softmax's backward multiplies by the weight).
                 z.par_chunks_mut(vertices * out).for_each(|frame_rows| {
-                    for (z, m) in frame_rows.iter_mut().zip(mask) {
+                    for (z, m) in frame_rows.iter_mut().zip(&mask.additive) {
                         *z += m;
                     }
                 });
@@ -337,6 +358,18 @@ fn weight_norm_backward(
     }
 }
 
+/// `∂Z = ∂H ⊙ S` in place, rows of `width`, flushing what falls below `tau` (see [`FLUSH`]).
+fn scale_by_slopes(dh: &mut [f32], slopes: &[f32], width: usize, tau: f32) {
+    dh.par_chunks_mut(width * CHUNK_ROWS)
+        .zip(slopes.par_chunks(width * CHUNK_ROWS))
+        .for_each(|(d, s)| {
+            for (d, s) in d.iter_mut().zip(s) {
+                *d *= s;
+            }
+            flush(d, tau);
+        });
+}
+
 /// The backward pass: `∂L/∂params` (flat, [`super::ParamLayout`] order) from `∂L/∂weights`
 /// (`grad`, rows × J). Returns the activation buffers to the pool.
 pub(crate) fn backward(
@@ -344,6 +377,7 @@ pub(crate) fn backward(
     params: &[f32],
     positions: &[f32],
     poses: Poses<'_>,
+    mask: Option<&LogitMask>,
     acts: Activations,
     grad: &[f32],
 ) -> Result<Vec<f32>> {
@@ -386,6 +420,28 @@ pub(crate) fn backward(
         let prev = hidden_input(ctx, i);
         dw.clear();
         dw.resize(out * inp, 0.0);
+        let [rv, rg, rb] = ctx.layout.ranges(i);
+        if let Some(mask) = mask.filter(|m| i + 1 == n && sparse_output(ctx, m)) {
+            let mut dh = ctx.pool.take(rows * prev);
+            sparse_output_backward(
+                &dz,
+                &acts.hidden[i - 1],
+                &acts.weights[i],
+                mask,
+                out,
+                inp,
+                vertices,
+                threads,
+                &mut dw,
+                &mut dparams[rb],
+                &mut dh,
+            );
+            scale_by_slopes(&mut dh, &acts.slopes[i - 1], prev, tau);
+            ctx.pool.give([std::mem::replace(&mut dz, dh)]);
+            let (dv, dg) = dparams[rv.start..rg.end].split_at_mut(rv.len());
+            weight_norm_backward(&dw, &params[rv], &params[rg], &acts.norms[i], inp, dv, dg);
+            continue;
+        }
         let dzm = MatRef::row_major(&dz, rows, out);
         if i > 0 {
             matmul(
@@ -396,7 +452,6 @@ pub(crate) fn backward(
                 threads,
             );
         }
-        let [rv, rg, rb] = ctx.layout.ranges(i);
         let mut db = vec![0.0f32; out];
         if reads_input(ctx, i) {
             let (per_vertex, per_frame) = frame_and_vertex_sums(&dz, out, frames, vertices);
@@ -407,22 +462,24 @@ pub(crate) fn backward(
                 false,
                 threads,
             );
-            if poses.per_row {
-                matmul(
+            match poses {
+                Poses::PerRow(data) => matmul(
                     MatMut::row_major(&mut dw, out, inp).columns(prev + pw, qw),
                     dzm.t(),
-                    MatRef::row_major(poses.data, rows, qw),
+                    MatRef::row_major(data, rows, qw),
                     false,
                     threads,
-                );
-            } else {
-                matmul(
+                ),
+                Poses::PerFrame(data) => matmul(
                     MatMut::row_major(&mut dw, out, inp).columns(prev + pw, qw),
                     MatRef::row_major(&per_frame, frames, out).t(),
-                    MatRef::row_major(poses.data, frames, qw),
+                    MatRef::row_major(data, frames, qw),
                     false,
                     1,
-                );
+                ),
+                Poses::Local(local) => {
+                    local_pose_backward(&mut dw, inp, prev + pw, &dz, local, out, threads);
+                }
             }
             for row in per_frame.chunks_exact(out) {
                 for (b, d) in db.iter_mut().zip(row) {
@@ -446,14 +503,7 @@ pub(crate) fn backward(
                 false,
                 threads,
             );
-            dh.par_chunks_mut(prev * CHUNK_ROWS)
-                .zip(acts.slopes[i - 1].par_chunks(prev * CHUNK_ROWS))
-                .for_each(|(d, s)| {
-                    for (d, s) in d.iter_mut().zip(s) {
-                        *d *= s;
-                    }
-                    flush(d, tau);
-                });
+            scale_by_slopes(&mut dh, &acts.slopes[i - 1], prev, tau);
             ctx.pool.give([std::mem::replace(&mut dz, dh)]);
         }
         dparams[rb].copy_from_slice(&db);

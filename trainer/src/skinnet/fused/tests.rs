@@ -8,10 +8,14 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinfield_formats::skf::{ModelConfig, SkfView};
 
+use std::sync::Arc;
+
 use super::ParamLayout;
 use crate::optim::{Adam, AdamConfig};
 use crate::skinnet::export::to_skf_model;
-use crate::skinnet::{Activation, Backend, PREFIX, TrainableSkinNet, position_inputs_tensor};
+use crate::skinnet::{
+    Activation, Backend, LocalPoses, PREFIX, TrainableSkinNet, position_inputs_tensor,
+};
 
 fn random_points(n: usize, seed: u64) -> Vec<Vec3> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -70,11 +74,30 @@ fn check_against_candle(
     points: usize,
     seed: u64,
 ) {
-    check_masked(config, vars, frames, points, seed, None, false);
+    check_masked(
+        config,
+        vars,
+        frames,
+        points,
+        seed,
+        None,
+        &PoseInput::PerFrame,
+    );
 }
 
-/// [`check_against_candle`] with an optional additive mask `[points, J]` on the logits, and a
-/// pose per frame (`[F, Q]`) or, with `per_row`, a different pose per row (`[F, V, Q]`).
+/// How [`check_masked`] feeds the poses.
+enum PoseInput {
+    /// `[F, Q]`.
+    PerFrame,
+    /// `[F, V, Q]`, a different pose per row.
+    PerRow,
+    /// `[F, V, Q]` as [`LocalPoses`] with these relevant joints (`[V, J]`) and five donors;
+    /// the reference gets the rows written out.
+    Local(Vec<bool>),
+}
+
+/// [`check_against_candle`] with an optional additive mask `[points, J]` on the logits and the
+/// poses fed as `input` says.
 fn check_masked(
     config: ModelConfig,
     vars: &VarMap,
@@ -82,22 +105,35 @@ fn check_masked(
     points: usize,
     seed: u64,
     mask: Option<&Tensor>,
-    per_row: bool,
+    input: &PoseInput,
 ) {
     let dev = Device::Cpu;
     let enc = position_inputs_tensor(&config, &random_points(points, seed), &dev).unwrap();
     let q = config.pose_width();
-    let poses = if per_row {
-        Tensor::from_vec(
+    let j = config.joint_count as usize;
+    let local = match input {
+        PoseInput::Local(relevant) => {
+            let own = random_values(frames * q, 1.5, seed + 1);
+            let donors = random_values(5 * q, 1.5, seed + 3);
+            let own: Vec<&[f32]> = own.chunks_exact(q).collect();
+            let donors: Vec<&[f32]> = donors.chunks_exact(q).collect();
+            let mut rng = ChaCha8Rng::seed_from_u64(seed + 4);
+            Some(Arc::new(
+                LocalPoses::draw(&own, &donors, relevant, j, &mut rng).unwrap(),
+            ))
+        }
+        _ => None,
+    };
+    let poses = match (input, &local) {
+        (_, Some(local)) => Tensor::from_vec(local.rows(), (frames, points, q), &dev),
+        (PoseInput::PerRow, _) => Tensor::from_vec(
             random_values(frames * points * q, 1.5, seed + 1),
             (frames, points, q),
             &dev,
-        )
-    } else {
-        Tensor::from_vec(random_values(frames * q, 1.5, seed + 1), (frames, q), &dev)
+        ),
+        _ => Tensor::from_vec(random_values(frames * q, 1.5, seed + 1), (frames, q), &dev),
     }
     .unwrap();
-    let j = config.joint_count as usize;
     let target = Tensor::from_vec(
         random_values(frames * points * j, 1.0, seed + 2),
         (frames, points, j),
@@ -106,7 +142,10 @@ fn check_masked(
     .unwrap();
 
     let (fused, fused_vars) = copy_net(config, vars, DType::F32);
-    let w_fused = fused.forward_masked(&enc, &poses, mask).unwrap();
+    let w_fused = match &local {
+        Some(local) => fused.forward_local(&enc, local, mask).unwrap(),
+        None => fused.forward_masked(&enc, &poses, mask).unwrap(),
+    };
     let g_fused = loss(&w_fused, &target).backward().unwrap();
 
     let (reference, ref_vars) = copy_net(config, vars, DType::F64);
@@ -221,47 +260,39 @@ fn gradients_equal_candle_on_random_nets() {
 
 #[test]
 fn masked_gradients_equal_candle() {
-    // Each point keeps 1–4 of 7 joints (a seeded pattern), as candidate masks do.
-    let config = ModelConfig::paper_architecture(7, [-1.0; 3], [1.0; 3]);
-    let points = 29;
-    let mut rng = ChaCha8Rng::seed_from_u64(17);
-    let lists: Vec<Vec<u16>> = (0..points)
-        .map(|_| {
-            let n = rng.random_range(1..=4);
-            let mut l: Vec<u16> = (0..7).collect();
-            for i in 0..n {
-                let k = rng.random_range(i..7);
-                l.swap(i, k);
-            }
-            let mut l = l[..n].to_vec();
-            l.sort_unstable();
-            l
-        })
-        .collect();
-    let mask = Tensor::from_vec(
-        crate::candidates::additive_mask(&lists, 7),
-        (points, 7),
-        &Device::Cpu,
-    )
-    .unwrap();
-    check_masked(
-        config,
-        &seeded_vars(config, 33),
-        3,
-        points,
-        8,
-        Some(&mask),
-        false,
-    );
-    check_masked(
-        config,
-        &seeded_vars(config, 34),
-        2,
-        points,
-        9,
-        Some(&mask),
-        true,
-    );
+    // Each point keeps 1–4 of 7 joints (a seeded pattern), as candidate masks do: the output
+    // layer is dense and masked. Then 1–3 of 16: few enough that it computes the candidates
+    // alone.
+    for (joints, most, sparse) in [(7u16, 4, false), (16, 3, true)] {
+        let config = ModelConfig::paper_architecture(joints.into(), [-1.0; 3], [1.0; 3]);
+        let j = joints as usize;
+        let points = 29;
+        let mut rng = ChaCha8Rng::seed_from_u64(17 + j as u64);
+        let lists: Vec<Vec<u16>> = (0..points)
+            .map(|_| {
+                let n = rng.random_range(1..=most);
+                let mut l: Vec<u16> = (0..joints).collect();
+                for i in 0..n {
+                    let k = rng.random_range(i..j);
+                    l.swap(i, k);
+                }
+                let mut l = l[..n].to_vec();
+                l.sort_unstable();
+                l
+            })
+            .collect();
+        let values = crate::candidates::additive_mask(&lists, j);
+        assert_eq!(
+            super::sparse::LogitMask::new(values.clone(), j).is_sparse(),
+            sparse
+        );
+        let mask = Tensor::from_vec(values, (points, j), &Device::Cpu).unwrap();
+        for (k, input) in [PoseInput::PerFrame, PoseInput::PerRow].iter().enumerate() {
+            let seed = 33 + j as u64 + k as u64;
+            let vars = seeded_vars(config, seed);
+            check_masked(config, &vars, 3 - k, points, seed + 8, Some(&mask), input);
+        }
+    }
 }
 
 #[test]
@@ -269,7 +300,68 @@ fn a_pose_per_row_gives_the_gradients_of_candle() {
     let (paper, narrow) = paper_and_narrow();
     for (k, config) in [paper, narrow].into_iter().enumerate() {
         let vars = seeded_vars(config, 40 + k as u64);
-        check_masked(config, &vars, 3, 23, 50 + k as u64, None, true);
+        check_masked(
+            config,
+            &vars,
+            3,
+            23,
+            50 + k as u64,
+            None,
+            &PoseInput::PerRow,
+        );
+    }
+}
+
+#[test]
+fn local_poses_give_the_gradients_of_candle_on_their_rows() {
+    // Pose locality's structured input against candle's graph fed the same rows written out:
+    // points relevant to no joint, to one, to several and to all, with the candidate mask that
+    // goes with them and without a mask; both architectures at 16 joints; few relevant joints
+    // (the structure is multiplied, and the masked output layer computes the candidates alone)
+    // and many (the rows are written out and the output layer is dense).
+    let (paper, narrow) = paper_and_narrow();
+    for (k, mut config) in [paper, narrow].into_iter().enumerate() {
+        config.joint_count = 16;
+        let j = 16;
+        let points = 36;
+        for (share, structured) in [(0.08, true), (0.5, false)] {
+            let seed = 70 + 10 * k as u64 + u64::from(structured);
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let relevant: Vec<bool> = (0..points)
+                .flat_map(|p| match p % 18 {
+                    0 => vec![false; j],
+                    1 => vec![true; j],
+                    2 => (0..j).map(|i| i == p % j).collect(),
+                    _ => (0..j).map(|_| rng.random_bool(share)).collect(),
+                })
+                .collect();
+            let own = random_values(config.pose_width(), 1.0, 1);
+            let probe = LocalPoses::draw(&[&own], &[&own], &relevant, j, &mut rng).unwrap();
+            assert_eq!(probe.worth_structure(), structured);
+            // The mask of the relevant joints (a point relevant to none keeps one).
+            let lists: Vec<Vec<u16>> = relevant
+                .chunks_exact(j)
+                .enumerate()
+                .map(|(p, r)| {
+                    let l: Vec<u16> = (0..j as u16).filter(|&i| r[i as usize]).collect();
+                    if l.is_empty() {
+                        vec![(p % j) as u16]
+                    } else {
+                        l
+                    }
+                })
+                .collect();
+            let values = crate::candidates::additive_mask(&lists, j);
+            assert_eq!(
+                super::sparse::LogitMask::new(values.clone(), j).is_sparse(),
+                structured
+            );
+            let mask = Tensor::from_vec(values, (points, j), &Device::Cpu).unwrap();
+            let vars = seeded_vars(config, seed + 100);
+            let input = PoseInput::Local(relevant.clone());
+            check_masked(config, &vars, 3, points, seed + 200, None, &input);
+            check_masked(config, &vars, 2, points, seed + 300, Some(&mask), &input);
+        }
     }
 }
 
