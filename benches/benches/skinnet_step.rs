@@ -241,19 +241,20 @@ fn mlp(c: &mut Criterion) {
     group.finish();
 }
 
-/// Pose locality's input (a pose per row: the frame's features for 8 candidate joints per
-/// vertex, a donor's for the rest, drawn from 64 donor poses) through the fused op's forward
+/// Pose locality's input (a pose per row: the frame's features for 3 to 8 candidate joints per
+/// vertex, 5.5 on average (the built-in character's lists hold 5.9), a donor's for the rest,
+/// drawn from 64 donor poses) through the fused op's forward
 /// and backward, masked to the candidates as in training, two ways: `dense_rows` writes it out
 /// as `[F, V, 3J]` rows through a full output layer (`with_structure(false)`: the training step
 /// before 2026-12-07), `structured` as the [`LocalPoses`] structure with the output layer over
 /// the candidates, where each pays (the default). The donors are drawn inside the loop for
-/// both, as the training step does every iteration. At the built-in character's 24 joints
-/// (where the structure does not pay and both run the dense path) and the MakeHuman body's 163.
+/// both, as the training step does every iteration. At the built-in character's 24 joints, the
+/// Female_Peasant's 65 and the MakeHuman body's 163.
 fn local_poses(c: &mut Criterion) {
     let mut group = c.benchmark_group("skinnet_pose_locality_4x2500");
     group.sample_size(10);
     let pool2 = pool(2);
-    for joints in [24u32, 163] {
+    for joints in [24u32, 65, 163] {
         let j = joints as usize;
         let config = ModelConfig::paper_architecture(joints, [-1.0; 3], [1.0; 3]);
         let q = config.pose_width();
@@ -270,12 +271,13 @@ fn local_poses(c: &mut Criterion) {
         let donors: Vec<&[f32]> = donors.chunks_exact(q).collect();
         let lists: Vec<Vec<u16>> = (0..POINTS)
             .map(|_| {
+                let n = rng.random_range(3..=8);
                 let mut l: Vec<u16> = (0..joints as u16).collect();
-                for i in 0..8 {
+                for i in 0..n {
                     let k = rng.random_range(i..j);
                     l.swap(i, k);
                 }
-                let mut l = l[..8].to_vec();
+                let mut l = l[..n].to_vec();
                 l.sort_unstable();
                 l
             })
