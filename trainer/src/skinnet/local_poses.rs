@@ -163,6 +163,22 @@ impl LocalPoses {
         &self.relevant_joints[self.relevant_starts[v]..self.relevant_starts[v + 1]]
     }
 
+    /// The features of row `b·V + v` where it differs from its donor: `(feature, row's value −
+    /// donor's value)` over the relevant joints' features, zero differences skipped. The row is
+    /// its donor's pose plus these.
+    pub fn differences(&self, row: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
+        let q = 3 * self.joints;
+        let b = row / self.vertices;
+        let frame = &self.frames[b * q..(b + 1) * q];
+        let d = self.donor(row);
+        let donor = &self.pool[d * q..(d + 1) * q];
+        self.relevant(row % self.vertices)
+            .iter()
+            .flat_map(|&j| 3 * j as usize..3 * j as usize + 3)
+            .map(move |c| (c, frame[c] - donor[c]))
+            .filter(|&(_, diff)| diff != 0.0)
+    }
+
     /// Whether multiplying the structure pays against multiplying the rows written out: the
     /// relevant joints are at most a quarter of all (`fused::worth_sparse`; at 8 of 24 joints
     /// the two cost the same, and the rows keep small rigs' results what they were).

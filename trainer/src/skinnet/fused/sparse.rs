@@ -255,7 +255,6 @@ pub(super) fn local_pose_forward(
             columns[c * out + o] = x;
         }
     }
-    let vertices = local.vertices();
     z.par_chunks_mut(out * CHUNK_ROWS)
         .enumerate()
         .for_each(|(chunk, rows)| {
@@ -265,17 +264,8 @@ pub(super) fn local_pose_forward(
                 for (z, x) in row.iter_mut().zip(&donors[dn * out..(dn + 1) * out]) {
                     *z += x;
                 }
-                let frame = &local.frames()[(r / vertices) * q..(r / vertices + 1) * q];
-                let donor = &local.pool()[dn * q..(dn + 1) * q];
-                for &j in local.relevant(r % vertices) {
-                    for c in 3 * j as usize..3 * j as usize + 3 {
-                        let diff = frame[c] - donor[c];
-                        if diff != 0.0 {
-                            for (z, x) in row.iter_mut().zip(&columns[c * out..(c + 1) * out]) {
-                                *z += diff * x;
-                            }
-                        }
-                    }
+                for (c, diff) in local.differences(r) {
+                    axpy(row, diff, &columns[c * out..(c + 1) * out]);
                 }
             }
         });
@@ -296,7 +286,6 @@ pub(super) fn local_pose_backward(
 ) {
     let q = 3 * local.joints();
     let d = local.donor_count();
-    let vertices = local.vertices();
     let rows = dz.len() / out;
     let per_task = rows.div_ceil(threads.max(1)).max(1);
     // Per task: the donor sums `[D, out]` and the relevant features' part `[Q, out]`.
@@ -312,17 +301,8 @@ pub(super) fn local_pose_backward(
                 for (s, x) in sums[dn * out..(dn + 1) * out].iter_mut().zip(drow) {
                     *s += x;
                 }
-                let frame = &local.frames()[(r / vertices) * q..(r / vertices + 1) * q];
-                let donor = &local.pool()[dn * q..(dn + 1) * q];
-                for &j in local.relevant(r % vertices) {
-                    for c in 3 * j as usize..3 * j as usize + 3 {
-                        let diff = frame[c] - donor[c];
-                        if diff != 0.0 {
-                            for (g, x) in relevant[c * out..(c + 1) * out].iter_mut().zip(drow) {
-                                *g += diff * x;
-                            }
-                        }
-                    }
+                for (c, diff) in local.differences(r) {
+                    axpy(&mut relevant[c * out..(c + 1) * out], diff, drow);
                 }
             }
             (sums, relevant)
