@@ -44,6 +44,46 @@ pub enum LocalPosesError {
     TooManyDonors(usize),
 }
 
+/// Each point's joints from a `[V, J]` row-major table, ascending, as compressed rows: pose
+/// locality's relevant joints here, the output layer's candidates in the fused op.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct JointLists {
+    /// `[V + 1]`: where each point's joints start in `joints`.
+    starts: Vec<usize>,
+    joints: Vec<u32>,
+}
+
+impl JointLists {
+    /// The joints `j` of each row of `table` (`width` columns, `width` > 0) with `keep(entry)`.
+    pub(crate) fn where_true<T>(table: &[T], width: usize, keep: impl Fn(&T) -> bool) -> Self {
+        let mut starts = Vec::with_capacity(table.len() / width + 1);
+        let mut joints = Vec::new();
+        starts.push(0);
+        for row in table.chunks_exact(width) {
+            // `width` is a joint count (the width of a `[V, J]` table that was allocated), far
+            // below u32::MAX.
+            joints.extend((0..width).filter(|&j| keep(&row[j])).map(|j| j as u32));
+            starts.push(joints.len());
+        }
+        Self { starts, joints }
+    }
+
+    /// The joints of point `v`.
+    pub(crate) fn of(&self, v: usize) -> &[u32] {
+        &self.joints[self.starts[v]..self.starts[v + 1]]
+    }
+
+    /// The joints of all points together.
+    pub(crate) fn total(&self) -> usize {
+        self.joints.len()
+    }
+
+    /// Whether some point has no joint.
+    pub(crate) fn has_empty(&self) -> bool {
+        self.starts.windows(2).any(|w| w[0] == w[1])
+    }
+}
+
 /// The pose input of one image iteration under pose locality, `[B, V, 3J]` in structure.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LocalPoses {
@@ -55,10 +95,8 @@ pub struct LocalPoses {
     pool: Vec<f32>,
     /// `[B·V]`: the donor of every row, an index into `pool`.
     donor: Vec<u32>,
-    /// `[V + 1]`: where each vertex's relevant joints start in `relevant_joints`.
-    relevant_starts: Vec<usize>,
-    /// The relevant joints of every vertex, ascending, concatenated.
-    relevant_joints: Vec<u32>,
+    /// The relevant joints of every vertex.
+    relevant: JointLists,
 }
 
 impl LocalPoses {
@@ -92,15 +130,7 @@ impl LocalPoses {
             });
         }
         let vertices = relevant.len() / joints;
-        let mut relevant_starts = Vec::with_capacity(vertices + 1);
-        let mut relevant_joints = Vec::new();
-        relevant_starts.push(0);
-        for keep in relevant.chunks_exact(joints) {
-            // `joints` fits u32: it is at most `relevant.len()`, itself below the cap of the
-            // candidate masks (and `3J` pose features were allocated for it).
-            relevant_joints.extend((0..joints).filter(|&j| keep[j]).map(|j| j as u32));
-            relevant_starts.push(relevant_joints.len());
-        }
+        let relevant = JointLists::where_true(relevant, joints, |&keep| keep);
         let donor = (0..poses.len() * vertices)
             .map(|_| rng.random_range(0..pool.len()) as u32)
             .collect();
@@ -110,8 +140,7 @@ impl LocalPoses {
             frames: poses.concat(),
             pool: pool.concat(),
             donor,
-            relevant_starts,
-            relevant_joints,
+            relevant,
         })
     }
 
@@ -160,7 +189,7 @@ impl LocalPoses {
     /// The joints relevant to vertex `v`, ascending.
     #[must_use]
     pub fn relevant(&self, v: usize) -> &[u32] {
-        &self.relevant_joints[self.relevant_starts[v]..self.relevant_starts[v + 1]]
+        self.relevant.of(v)
     }
 
     /// The features of row `b·V + v` where it differs from its donor: `(feature, row's value −
@@ -184,7 +213,7 @@ impl LocalPoses {
     /// the two cost the same, and the rows keep small rigs' results what they were).
     #[must_use]
     pub fn worth_structure(&self) -> bool {
-        super::fused::worth_sparse(self.relevant_joints.len(), self.vertices * self.joints)
+        super::fused::worth_sparse(self.relevant.total(), self.vertices * self.joints)
     }
 
     /// The dense input `[B, V, 3J]`, row-major: what the structure stands for.

@@ -18,8 +18,8 @@ use super::sparse::{
 };
 use crate::skinnet::LocalPoses;
 
-/// Rows per parallel task of the elementwise passes.
-const CHUNK_ROWS: usize = 256;
+/// Rows per parallel task of the elementwise and row passes (here and in [`super::sparse`]).
+pub(super) const CHUNK_ROWS: usize = 256;
 
 /// Activations and slopes below this (2^-40 ≈ 9e-13) are stored as zero, and gradients below
 /// this fraction of the largest output gradient are flushed to zero. Products of such values

@@ -13,10 +13,9 @@
 use rayon::prelude::*;
 
 use super::gemm::{MatMut, MatRef, matmul};
+use super::pass::CHUNK_ROWS;
 use crate::skinnet::LocalPoses;
-
-/// Rows per parallel task of the row passes.
-const CHUNK_ROWS: usize = 256;
+use crate::skinnet::local_poses::JointLists;
 
 /// Whether a structure with `kept` of `total` entries (relevant or candidate joints, summed over
 /// the points) is worth computing sparsely: at most a quarter of the entries.
@@ -31,14 +30,7 @@ pub(crate) fn worth_sparse(kept: usize, total: usize) -> bool {
 #[derive(Debug)]
 pub(crate) struct LogitMask {
     pub(crate) additive: Vec<f32>,
-    candidates: Option<Candidates>,
-}
-
-/// Each point's candidate joints, ascending, as compressed rows.
-#[derive(Debug)]
-struct Candidates {
-    starts: Vec<usize>,
-    joints: Vec<u32>,
+    candidates: Option<JointLists>,
 }
 
 impl LogitMask {
@@ -60,31 +52,15 @@ impl LogitMask {
         }
     }
 
-    fn candidates(additive: &[f32], joints: usize) -> Option<Candidates> {
+    fn candidates(additive: &[f32], joints: usize) -> Option<JointLists> {
         if joints == 0
             || !additive.len().is_multiple_of(joints)
             || additive.iter().any(|&m| m != 0.0 && m != f32::NEG_INFINITY)
         {
             return None;
         }
-        let kept = additive.iter().filter(|&&m| m == 0.0).count();
-        if !worth_sparse(kept, additive.len()) {
-            return None;
-        }
-        let mut starts = vec![0];
-        let mut list = Vec::with_capacity(kept);
-        for row in additive.chunks_exact(joints) {
-            // `joints` is the width of the output layer, under `MAX_LAYER_WIDTH`.
-            list.extend((0..joints).filter(|&j| row[j] == 0.0).map(|j| j as u32));
-            if list.len() == *starts.last()? {
-                return None;
-            }
-            starts.push(list.len());
-        }
-        Some(Candidates {
-            starts,
-            joints: list,
-        })
+        let lists = JointLists::where_true(additive, joints, |&m| m == 0.0);
+        (worth_sparse(lists.total(), additive.len()) && !lists.has_empty()).then_some(lists)
     }
 
     /// Whether the output layer is computed over the candidates alone.
@@ -93,9 +69,7 @@ impl LogitMask {
     }
 
     fn of(&self, v: usize) -> &[u32] {
-        self.candidates
-            .as_ref()
-            .map_or(&[], |c| &c.joints[c.starts[v]..c.starts[v + 1]])
+        self.candidates.as_ref().map_or(&[], |c| c.of(v))
     }
 }
 
@@ -115,6 +89,16 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
         }
     }
     lanes.iter().sum::<f32>() + tail
+}
+
+/// Two parallel tasks' pairs of accumulators summed element-wise (what their reductions need).
+fn add_pairs(
+    (mut a, mut b): (Vec<f32>, Vec<f32>),
+    (c, d): (Vec<f32>, Vec<f32>),
+) -> (Vec<f32>, Vec<f32>) {
+    a.iter_mut().zip(c).for_each(|(x, y)| *x += y);
+    b.iter_mut().zip(d).for_each(|(x, y)| *x += y);
+    (a, b)
 }
 
 /// `y += a·x`.
@@ -216,11 +200,7 @@ pub(super) fn sparse_output_backward(
             }
             (gw, gb)
         })
-        .reduce(zeros, |(mut w, mut b), (w2, b2)| {
-            w.iter_mut().zip(w2).for_each(|(a, x)| *a += x);
-            b.iter_mut().zip(b2).for_each(|(a, x)| *a += x);
-            (w, b)
-        });
+        .reduce(zeros, add_pairs);
     dw.copy_from_slice(&gw);
     db.copy_from_slice(&gb);
 }
@@ -307,11 +287,7 @@ pub(super) fn local_pose_backward(
             }
             (sums, relevant)
         })
-        .reduce(zeros, |(mut s, mut g), (s2, g2)| {
-            s.iter_mut().zip(s2).for_each(|(a, b)| *a += b);
-            g.iter_mut().zip(g2).for_each(|(a, b)| *a += b);
-            (s, g)
-        });
+        .reduce(zeros, add_pairs);
     matmul(
         MatMut::row_major(dw, out, inp).columns(at, q),
         MatRef::row_major(&sums, d, out).t(),
