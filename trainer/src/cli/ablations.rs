@@ -309,8 +309,8 @@ fn export_best_and_score(
     eval_row(capture, &Skinning::Skf(path), name)
 }
 
-/// The "silhouettes only" row: the training as configured with the Laplacian and the skinning
-/// regularisers off, so the row says what the silhouette terms alone do to the weights. When
+/// The "silhouettes only" row: the training as configured with the Laplacian, the skinning
+/// regularisers and both priors on the initial weights off, so the row says what the silhouette terms alone do to the weights. When
 /// the base configuration runs stage 4 at full resolution (the default) so does this row, with
 /// the same iterations and without the rendering term; otherwise stage 1 runs for as many image
 /// iterations as stage 1 and stage 4 together. Stage 1 trains on `data`, stage 4 on
@@ -331,6 +331,7 @@ fn silhouettes_only(
         skinning: 0.0,
         partwise: 0.0,
         prior: 0.0,
+        hidden_prior: 0.0,
         ..base.weights
     };
     let config = if base.stages.full_resolution {

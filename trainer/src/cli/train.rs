@@ -446,6 +446,12 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
     if let Some(offsets) = trainer.outline_offsets()? {
         println!("  {}", describe_outline_offsets(&offsets));
     }
+    if let Some((hidden, total)) = trainer.hidden_vertices() {
+        println!(
+            "  the prior on hidden vertices held {hidden} of the {total} training vertices (on \
+             no training outline when posed by the initial weights)"
+        );
+    }
     if let Some(margin) = report.mask_margin() {
         eprintln!("warning: {margin}.");
     }

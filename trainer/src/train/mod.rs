@@ -25,6 +25,7 @@ pub mod data;
 pub mod ensemble;
 mod error;
 mod export;
+mod hidden;
 pub mod outline_offset;
 pub mod plot;
 pub mod pose_locality;
@@ -111,6 +112,9 @@ pub struct Trainer {
     /// With [`TrainData::queries`]: `Σ_j w_init ln w_init` of every full-resolution row, so a
     /// batch of query rows sums its constant instead of copying its weights out each step.
     query_neg_entropy: Vec<f64>,
+    /// With [`LossWeights::hidden_prior`]: 1 for each training vertex no training outline
+    /// shows, else 0, as `[1, V, 1]` ([`hidden`]), and the same as numbers.
+    hidden_gate: Option<(Tensor, Vec<f32>)>,
     /// Time per phase of the iterations run so far.
     profile: StepProfile,
     /// The training template's edges (silhouette edges are found among them every view).
@@ -339,6 +343,14 @@ impl Trainer {
         let triangles: Arc<[[u32; 3]]> = t.triangles.clone().into();
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
+        // SkinNet only (`LossWeights::hidden_prior`).
+        let hidden_gate = if config.weights.hidden_prior > 0.0 && !static_weights {
+            let (counts, views) = hidden::outline_view_counts(&data, &data.init_weights, &edges);
+            let gate = hidden::hidden_gate(&counts, views, config.hidden_view_fraction);
+            Some((Tensor::from_vec(gate.clone(), (1, v, 1), &dev)?, gate))
+        } else {
+            None
+        };
         let init_entropy = crate::losses::prior::neg_entropy(&data.init_weights) / v.max(1) as f64;
         let query_init = match &data.queries {
             Some(q) if !static_weights => {
@@ -379,6 +391,7 @@ impl Trainer {
             query_init,
             init_entropy,
             query_neg_entropy,
+            hidden_gate,
             profile: StepProfile::default(),
             edges,
             triangles,
@@ -409,6 +422,15 @@ impl Trainer {
             kl: self.warm_window.iter().map(|w| w.0).sum::<f64>() / n,
             position_relative: self.warm_window.iter().map(|w| w.1).sum::<f64>() / n,
         }
+    }
+
+    /// With [`LossWeights::hidden_prior`]: how many of the training template's vertices the
+    /// prior holds (on no training outline, [`hidden`]), and the template's vertex count.
+    #[must_use]
+    pub fn hidden_vertices(&self) -> Option<(usize, usize)> {
+        self.hidden_gate
+            .as_ref()
+            .map(|(_, gate)| (gate.iter().filter(|&&g| g > 0.0).count(), gate.len()))
     }
 
     /// Whether the warm start still has iterations to run.

@@ -23,18 +23,21 @@ pub struct LossRecord {
     pub partwise: f64,
     /// `KL(w_init ‖ w)` per vertex (nats).
     pub prior: f64,
+    /// `KL(w_init ‖ w)` summed over the hidden vertices, per template vertex (nats; 0 without
+    /// [`crate::train::LossWeights::hidden_prior`]).
+    pub hidden_prior: f64,
 }
 
 impl LossRecord {
     /// CSV header matching [`LossRecord::csv_row`].
-    pub const CSV_HEADER: &'static str =
-        "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise,prior";
+    pub const CSV_HEADER: &'static str = "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise,prior,\
+         hidden_prior";
 
     /// One CSV row.
     #[must_use]
     pub fn csv_row(&self) -> String {
         format!(
-            "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
+            "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
             self.iteration,
             self.total,
             self.silhouette_boundary,
@@ -42,7 +45,8 @@ impl LossRecord {
             self.laplacian,
             self.skinning,
             self.partwise,
-            self.prior
+            self.prior,
+            self.hidden_prior
         )
     }
 }

@@ -47,15 +47,29 @@ impl Trainer {
             (cross, neg_entropy, lbs(&target, &skinning, &rest)?)
         } else {
             let init = self.init_at(query.as_ref())?;
-            let (cross, neg_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref())?;
+            let (cross, neg_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref(), None)?;
             let posed = self.initial_posing(&init, &skinning, &rest, b)?;
             (cross, neg_entropy, posed)
         };
         timer.lap(&mut self.profile, KIND, Phase::Regularisers);
-        let offset = (lbs(&w, &skinning, &rest)? - target_posed)?;
+        // At weight 0 (the default) the position error is only measured, for the convergence
+        // test: from detached weights and outside the total, so the backward pass does not run
+        // through the skinning of every frame for a zero gradient (the model is the same to the
+        // byte).
+        let position_weight = self.warm_settings().position_weight;
+        let skinned = if position_weight == 0.0 {
+            lbs(&w.detach(), &skinning, &rest)?
+        } else {
+            lbs(&w, &skinning, &rest)?
+        };
+        let offset = (skinned - target_posed)?;
         let position =
             (offset.sqr()?.sum_all()? / ((b * v) as f64 * self.diagonal * self.diagonal))?;
-        let total = (&cross + (&position * self.warm_settings().position_weight)?)?;
+        let total = if position_weight == 0.0 {
+            cross.clone()
+        } else {
+            (&cross + (&position * position_weight)?)?
+        };
         let kl = f64::from(cross.to_vec0::<f32>()?) + init_entropy;
         let position_relative = f64::from(position.to_vec0::<f32>()?).max(0.0).sqrt();
         timer.lap(&mut self.profile, KIND, Phase::Skinning);
@@ -159,7 +173,12 @@ impl Trainer {
             (self.laplacian.loss(&lap_input)? / (b as f64 * v * self.diagonal * self.diagonal))?;
         let skin = (self.skinning.loss(&w)? / (b as f64 * v))?;
         let part = (self.partwise.loss(&w)? / (b * self.partwise.count().max(1)) as f64)?;
-        let (prior, init_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref())?;
+        let (prior, init_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref(), None)?;
+        // The prior restricted to the vertices no training outline shows (SkinNet only).
+        let (hidden_prior, hidden_entropy) = match &self.hidden_gate {
+            Some(gate) => self.prior_cross_entropy(&w, &init, query.as_ref(), Some(gate))?,
+            None => (Tensor::zeros((), w.dtype(), w.device())?, 0.0),
+        };
         let lw = self.config.weights;
         let weighted = [
             (&sb, lw.silhouette_boundary),
@@ -168,6 +187,7 @@ impl Trainer {
             (&skin, lw.skinning),
             (&part, lw.partwise),
             (&prior, lw.prior),
+            (&hidden_prior, lw.hidden_prior),
         ];
         // Every term is logged; one of weight 0 stays out of the total, so the backward pass
         // does not run through it (multiplied by 0 it would, for nothing). Only when every
@@ -205,6 +225,7 @@ impl Trainer {
             skinning: val(&skin)?,
             partwise: val(&part)?,
             prior: val(&prior)? + init_entropy,
+            hidden_prior: val(&hidden_prior)? + hidden_entropy,
         };
         let grads = objective.backward()?;
         timer.lap(&mut self.profile, kind, Phase::Backward);
@@ -226,29 +247,44 @@ impl Trainer {
         Ok(record)
     }
 
-    /// The prior's cross-entropy ([`crate::losses::prior`]) averaged over the batch's vertices
+    /// The prior's cross-entropy ([`crate::losses::prior`]) summed over the batch's vertices
     /// (`w` is `[B, V, J]`, `init` `[1, V, J]`, at query rows `query` or at the training
-    /// vertices), and the initial weights' mean negative entropy there: their sum is
-    /// `KL(w_init ‖ w)` per vertex.
+    /// vertices), or with `gate` (a `[1, V, 1]` tensor of 0 and 1, and its numbers) over those
+    /// it marks ([`super::hidden`]), divided by `B·V` either way; and the initial weights'
+    /// negative entropy over the same rows divided by `V`: their sum is `KL(w_init ‖ w)` per
+    /// vertex.
     fn prior_cross_entropy(
         &self,
         w: &Tensor,
         init: &Tensor,
         query: Option<&Tensor>,
+        gate: Option<&(Tensor, Vec<f32>)>,
     ) -> Result<(Tensor, f64), TrainError> {
         let (b, v) = (w.dim(0)?, self.data.template.vertex_count());
-        let cross = (crate::losses::prior::cross_entropy(w, init)? / ((b * v) as f64))?;
-        let init_entropy = match query {
-            Some(rows) => {
-                let rows = rows.to_vec1::<u32>()?;
-                let total: f64 = rows
-                    .iter()
-                    .map(|&r| self.query_neg_entropy[r as usize])
-                    .sum();
-                total / v.max(1) as f64
-            }
-            None => self.init_entropy,
+        let target = match gate {
+            Some((g, _)) => init.broadcast_mul(g)?,
+            None => init.clone(),
         };
-        Ok((cross, init_entropy))
+        let cross = (crate::losses::prior::cross_entropy(w, &target)? / ((b * v) as f64))?;
+        let kept = |i: usize| gate.is_none_or(|(_, g)| g[i] > 0.0);
+        let total: f64 = match (query, gate) {
+            (Some(rows), _) => rows
+                .to_vec1::<u32>()?
+                .iter()
+                .enumerate()
+                .filter(|&(i, _)| kept(i))
+                .map(|(_, &r)| self.query_neg_entropy[r as usize])
+                .sum(),
+            (None, None) => return Ok((cross, self.init_entropy)),
+            (None, Some(_)) => self
+                .data
+                .init_weights
+                .chunks_exact(self.data.skeleton.len().max(1))
+                .enumerate()
+                .filter(|&(i, _)| kept(i))
+                .map(|(_, row)| crate::losses::prior::neg_entropy(row))
+                .sum(),
+        };
+        Ok((cross, total / v.max(1) as f64))
     }
 }

@@ -1036,13 +1036,10 @@ fn the_exported_model_records_the_training_poses_feature_range() {
     assert_eq!(trainer.skf_model().unwrap().pose_range, None);
 }
 
-#[test]
-fn the_prior_alone_pulls_skinnet_to_the_initial_weights_and_logs_its_kl() {
-    // No warm start, so SkinNet starts away from the initial weights; every other term off.
-    let (data, _) = scene(1);
-    let init = data.init_weights.clone();
-    let joints = data.skeleton.len();
-    let cfg = TrainConfig {
+/// 40 image iterations without a warm start (so SkinNet starts away from the initial weights)
+/// at a high rate, with the silhouettes and the Laplacian off and the priors of `weights`.
+fn priors_only(weights: LossWeights) -> TrainConfig {
+    TrainConfig {
         iterations: 40,
         warm_start_iterations: 0,
         lr_warmup: 0,
@@ -1054,11 +1051,22 @@ fn the_prior_alone_pulls_skinnet_to_the_initial_weights_and_logs_its_kl() {
             silhouette_boundary: 0.0,
             silhouette_contour: 0.0,
             laplacian: 0.0,
-            prior: 1.0,
-            ..Default::default()
+            ..weights
         },
         ..config()
-    };
+    }
+}
+
+#[test]
+fn the_prior_alone_pulls_skinnet_to_the_initial_weights_and_logs_its_kl() {
+    // No warm start, so SkinNet starts away from the initial weights; every other term off.
+    let (data, _) = scene(1);
+    let init = data.init_weights.clone();
+    let joints = data.skeleton.len();
+    let cfg = priors_only(LossWeights {
+        prior: 1.0,
+        ..LossWeights::default()
+    });
     // At weight 0 the KL is still logged, and nothing moves.
     let off = TrainConfig {
         weights: LossWeights {
@@ -1095,6 +1103,72 @@ fn the_prior_alone_pulls_skinnet_to_the_initial_weights_and_logs_its_kl() {
     assert!(after < 0.2 * before, "KL {before} → {after}");
     assert!((logged_idle - before).abs() < 1e-4 * before.max(1.0));
     assert_eq!(idle.step().unwrap().prior, logged_idle);
+}
+
+#[test]
+fn the_hidden_prior_holds_only_the_vertices_no_outline_shows_and_logs_their_kl() {
+    // The tube seen from the front: its sides are on the outline, its front and back are not.
+    let (data, _) = scene(1);
+    let init = data.init_weights.clone();
+    let joints = data.skeleton.len();
+    let cfg = priors_only(LossWeights {
+        hidden_prior: 1.0,
+        ..LossWeights::default()
+    });
+    let positions = data.template.positions.clone();
+    let mut t = Trainer::new(data, cfg, false).unwrap();
+    let gate = t.hidden_gate.as_ref().unwrap().1.clone();
+    // A middle ring (y = 0.5): the vertices facing the camera (+z) or away are hidden, those
+    // on the sides (±x) are seen.
+    for (i, p) in positions.iter().enumerate() {
+        if (p.y - 0.5).abs() < 1e-4 {
+            if p.x.abs() < 0.01 {
+                assert_eq!(gate[i], 1.0, "vertex {i} at {p} faces the camera or away");
+            }
+            if p.z.abs() < 0.01 {
+                assert_eq!(gate[i], 0.0, "vertex {i} at {p} is on the outline");
+            }
+        }
+    }
+    // KL(w_init ‖ w) over the gated vertices, per template vertex, in f64.
+    let kl = |t: &Trainer, hidden: bool| {
+        let w = t.weights(&[0]).unwrap().flatten_all().unwrap();
+        let w = w.to_vec1::<f32>().unwrap();
+        let total: f64 = w
+            .chunks(joints)
+            .zip(init.chunks(joints))
+            .zip(&gate)
+            .filter(|&(_, &g)| (g == 1.0) == hidden)
+            .flat_map(|((q, p), _)| q.iter().zip(p))
+            .filter(|&(_, &p)| p > 0.0)
+            .map(|(&q, &p)| f64::from(p) * (f64::from(p) / f64::from(q.max(1e-12))).ln())
+            .sum();
+        total / gate.len() as f64
+    };
+    let before = kl(&t, true);
+    assert!(before > 0.0);
+    let first = t.step().unwrap().hidden_prior;
+    assert!(
+        (first - before).abs() < 1e-4 * before.max(1.0),
+        "{first} vs {before}"
+    );
+    for _ in 1..40 {
+        t.step().unwrap();
+    }
+    let after = kl(&t, true);
+    assert!(
+        after < 0.2 * before,
+        "hidden vertices' KL {before} → {after}"
+    );
+    // Off, or on the static baseline (whose weights are free per vertex), the term is logged as
+    // a zero and holds nothing.
+    let (data, _) = scene(1);
+    let mut idle = Trainer::new(data.clone(), config(), false).unwrap();
+    assert!(idle.hidden_gate.is_none());
+    assert_eq!(idle.step().unwrap().hidden_prior, 0.0);
+    let baseline = Trainer::new(data, t.config().clone(), true).unwrap();
+    assert_eq!(baseline.hidden_vertices(), None);
+    assert!(t.hidden_vertices().is_some_and(|(h, n)| 0 < h && h < n));
 }
 
 /// [`scene`]'s frames posed with the elbow turned `elbow` radians further (alternating sign) and

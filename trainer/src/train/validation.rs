@@ -306,7 +306,7 @@ pub fn score_posed(
 }
 
 /// Linear blend skinning of `rest` with weights `w` (`[V][J]`) and `skinning` matrices.
-fn pose(rest: &[Vec3], w: &[f32], skinning: &[Mat4]) -> Vec<Vec3> {
+pub(crate) fn pose(rest: &[Vec3], w: &[f32], skinning: &[Mat4]) -> Vec<Vec3> {
     let j = skinning.len();
     rest.iter()
         .zip(w.chunks_exact(j.max(1)))

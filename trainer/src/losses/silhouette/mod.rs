@@ -608,7 +608,7 @@ impl CustomOp2 for SilhouetteLoss {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 /// One point of [`normal_sweep`].
 #[derive(Clone, Copy, Debug, PartialEq)]
