@@ -29,7 +29,7 @@ use crate::losses::silhouette::edges::{ViewGeometry, mesh_outline};
 /// How many training views (frame × camera) have each template vertex on the outline of the
 /// template posed by `weights` (dense `[V, J]`, one set for every frame), out of how many views.
 #[must_use]
-pub(crate) fn outline_view_counts(
+pub fn outline_view_counts(
     data: &TrainData,
     weights: &[f32],
     edges: &EdgeTable,
@@ -64,7 +64,7 @@ pub(crate) fn outline_view_counts(
 
 /// The gate: 1 for a vertex on the outline in at most `fraction` of `views`, else 0.
 #[must_use]
-pub(crate) fn hidden_gate(counts: &[u32], views: usize, fraction: f64) -> Vec<f32> {
+pub fn hidden_gate(counts: &[u32], views: usize, fraction: f64) -> Vec<f32> {
     let limit = fraction * views as f64;
     counts
         .iter()

@@ -25,7 +25,7 @@ pub mod data;
 pub mod ensemble;
 mod error;
 mod export;
-mod hidden;
+pub mod hidden;
 pub mod outline_offset;
 pub mod plot;
 pub mod pose_locality;
