@@ -310,11 +310,11 @@ fn export_best_and_score(
 }
 
 /// The "silhouettes only" row: the training as configured with the Laplacian, the skinning
-/// regularisers and both priors on the initial weights off, so the row says what the silhouette terms alone do to the weights. When
-/// the base configuration runs stage 4 at full resolution (the default) so does this row, with
-/// the same iterations and without the rendering term; otherwise stage 1 runs for as many image
-/// iterations as stage 1 and stage 4 together. Stage 1 trains on `data`, stage 4 on
-/// `stage_data` (the full template's).
+/// regularisers and both priors on the initial weights off, so the row says what the silhouette
+/// terms alone do to the weights. When the base configuration runs stage 4 at full resolution
+/// (the default) so does this row, with the same iterations and without the rendering term;
+/// otherwise stage 1 runs for as many image iterations as stage 1 and stage 4 together. Stage 1
+/// trains on `data`, stage 4 on `stage_data` (the full template's).
 fn silhouettes_only(
     capture: &Capture,
     data: &TrainData,
