@@ -48,8 +48,8 @@ pub struct LossWeights {
     /// Off by default (measured 2026-12-07, docs/experiments/fidelity.md, "The prior on the
     /// hidden vertices"): it turns silhouettes without the Laplacian from worse than bone heat
     /// into 0.57–0.59 cm on the built-in capture, but added to the defaults it costs 0.024 cm
-    /// there, 0.02–0.04 on the held-out phases and 18–24 % on the Female_Peasant and the
-    /// MakeHuman body (ours then above static), while the worst-vertex checks still fail.
+    /// there, 0.02–0.04 on the held-out phases and 18–38 % on four zoo characters (ours then
+    /// above static), while the worst-vertex checks still fail.
     ///
     /// SkinNet only: the static baseline's weights are free per vertex, so nothing carries the
     /// seen vertices' change onto the hidden ones, and its hidden vertices move only with their
