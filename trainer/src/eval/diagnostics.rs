@@ -23,7 +23,7 @@ use skinfield_formats::capture::Capture;
 
 use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s, sorted_influences};
 use crate::losses::silhouette::EdgeTable;
-use crate::losses::silhouette::edges::{ViewGeometry, mesh_outline};
+use crate::losses::silhouette::edges::count_outline_views;
 use crate::train::data::{DataError, DataOptions, TrainData, initial_weights, train_data};
 use crate::train::validation::{ValidationScore, score_posed};
 
@@ -144,12 +144,7 @@ pub fn truth_outline_views(capture: &Capture) -> Option<Vec<u32>> {
     let mut views = vec![0u32; capture.template.vertex_count()];
     for &frame in &capture.train_frames {
         let posed = capture.evaluation_gt_mesh(frame).ok()?;
-        for camera in &capture.rig.cameras {
-            let geometry = ViewGeometry::new(camera, &posed);
-            for i in mesh_outline(camera, &posed, triangles, &edges, &geometry).vertices {
-                views[i as usize] += 1;
-            }
-        }
+        count_outline_views(&mut views, &capture.rig.cameras, &posed, triangles, &edges);
     }
     Some(views)
 }

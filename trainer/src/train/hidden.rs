@@ -24,7 +24,7 @@ use rayon::prelude::*;
 use super::data::TrainData;
 use super::validation::pose;
 use crate::losses::silhouette::EdgeTable;
-use crate::losses::silhouette::edges::{ViewGeometry, mesh_outline};
+use crate::losses::silhouette::edges::count_outline_views;
 
 /// How many training views (frame × camera) have each template vertex on the outline of the
 /// template posed by `weights` (dense `[V, J]`, one set for every frame), out of how many views.
@@ -43,13 +43,8 @@ pub fn outline_view_counts(
         .map(|frame| {
             let posed: Vec<Vec3> = pose(&t.positions, weights, &frame.skinning);
             let mut counts = vec![0u32; v];
-            for view in &frame.views {
-                let geometry = ViewGeometry::new(&view.camera, &posed);
-                let outline = mesh_outline(&view.camera, &posed, &t.triangles, edges, &geometry);
-                for i in outline.vertices {
-                    counts[i as usize] += 1;
-                }
-            }
+            let cameras = frame.views.iter().map(|view| &view.camera);
+            count_outline_views(&mut counts, cameras, &posed, &t.triangles, edges);
             counts
         })
         .reduce(

@@ -112,9 +112,8 @@ pub struct Trainer {
     /// With [`TrainData::queries`]: `Σ_j w_init ln w_init` of every full-resolution row, so a
     /// batch of query rows sums its constant instead of copying its weights out each step.
     query_neg_entropy: Vec<f64>,
-    /// With [`LossWeights::hidden_prior`]: 1 for each training vertex no training outline
-    /// shows, else 0, as `[1, V, 1]` ([`hidden`]), and the same as numbers.
-    hidden_gate: Option<(Tensor, Vec<f32>)>,
+    /// With [`LossWeights::hidden_prior`]: the training vertices no training outline shows.
+    hidden_gate: Option<HiddenGate>,
     /// Time per phase of the iterations run so far.
     profile: StepProfile,
     /// The training template's edges (silhouette edges are found among them every view).
@@ -167,6 +166,18 @@ pub struct WarmSettings {
     pub position_tolerance: f64,
     /// Weight of the posed-position term in the objective.
     pub position_weight: f64,
+}
+
+/// The vertices [`LossWeights::hidden_prior`] holds ([`hidden`]).
+struct HiddenGate {
+    /// 1 for each training vertex no training outline shows, else 0, as `[1, V, 1]`.
+    tensor: Tensor,
+    /// The same as numbers, `[V]`.
+    gate: Vec<f32>,
+    /// `Σ w_init ln w_init` over the gated vertices' initial weights, divided by `V`: the
+    /// constant that turns their cross-entropy into a KL divergence when the batch is the
+    /// training vertices themselves (no query rows).
+    init_entropy: f64,
 }
 
 /// Copies of parameters by name.
@@ -347,7 +358,18 @@ impl Trainer {
         let hidden_gate = if config.weights.hidden_prior > 0.0 && !static_weights {
             let (counts, views) = hidden::outline_view_counts(&data, &data.init_weights, &edges);
             let gate = hidden::hidden_gate(&counts, views, config.hidden_view_fraction);
-            Some((Tensor::from_vec(gate.clone(), (1, v, 1), &dev)?, gate))
+            let entropy: f64 = data
+                .init_weights
+                .chunks_exact(j.max(1))
+                .zip(&gate)
+                .filter(|&(_, &g)| g > 0.0)
+                .map(|(row, _)| crate::losses::prior::neg_entropy(row))
+                .sum();
+            Some(HiddenGate {
+                tensor: Tensor::from_vec(gate.clone(), (1, v, 1), &dev)?,
+                gate,
+                init_entropy: entropy / v.max(1) as f64,
+            })
         } else {
             None
         };
@@ -430,7 +452,7 @@ impl Trainer {
     pub fn hidden_vertices(&self) -> Option<(usize, usize)> {
         self.hidden_gate
             .as_ref()
-            .map(|(_, gate)| (gate.iter().filter(|&&g| g > 0.0).count(), gate.len()))
+            .map(|h| (h.gate.iter().filter(|&&g| g > 0.0).count(), h.gate.len()))
     }
 
     /// Whether the warm start still has iterations to run.

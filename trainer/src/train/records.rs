@@ -30,8 +30,10 @@ pub struct LossRecord {
 
 impl LossRecord {
     /// CSV header matching [`LossRecord::csv_row`].
-    pub const CSV_HEADER: &'static str = "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise,prior,\
-         hidden_prior";
+    pub const CSV_HEADER: &'static str = concat!(
+        "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise,",
+        "prior,hidden_prior"
+    );
 
     /// One CSV row.
     #[must_use]

@@ -249,8 +249,8 @@ impl Trainer {
 
     /// The prior's cross-entropy ([`crate::losses::prior`]) summed over the batch's vertices
     /// (`w` is `[B, V, J]`, `init` `[1, V, J]`, at query rows `query` or at the training
-    /// vertices), or with `gate` (a `[1, V, 1]` tensor of 0 and 1, and its numbers) over those
-    /// it marks ([`super::hidden`]), divided by `B·V` either way; and the initial weights'
+    /// vertices), or with `gate` over the vertices it marks ([`super::hidden`]), divided by
+    /// `B·V` either way; and the initial weights'
     /// negative entropy over the same rows divided by `V`: their sum is `KL(w_init ‖ w)` per
     /// vertex.
     fn prior_cross_entropy(
@@ -258,33 +258,29 @@ impl Trainer {
         w: &Tensor,
         init: &Tensor,
         query: Option<&Tensor>,
-        gate: Option<&(Tensor, Vec<f32>)>,
+        gate: Option<&HiddenGate>,
     ) -> Result<(Tensor, f64), TrainError> {
         let (b, v) = (w.dim(0)?, self.data.template.vertex_count());
         let target = match gate {
-            Some((g, _)) => init.broadcast_mul(g)?,
+            Some(g) => init.broadcast_mul(&g.tensor)?,
             None => init.clone(),
         };
         let cross = (crate::losses::prior::cross_entropy(w, &target)? / ((b * v) as f64))?;
-        let kept = |i: usize| gate.is_none_or(|(_, g)| g[i] > 0.0);
-        let total: f64 = match (query, gate) {
-            (Some(rows), _) => rows
-                .to_vec1::<u32>()?
-                .iter()
-                .enumerate()
-                .filter(|&(i, _)| kept(i))
-                .map(|(_, &r)| self.query_neg_entropy[r as usize])
-                .sum(),
-            (None, None) => return Ok((cross, self.init_entropy)),
-            (None, Some(_)) => self
-                .data
-                .init_weights
-                .chunks_exact(self.data.skeleton.len().max(1))
-                .enumerate()
-                .filter(|&(i, _)| kept(i))
-                .map(|(_, row)| crate::losses::prior::neg_entropy(row))
-                .sum(),
+        let entropy = match (query, gate) {
+            (Some(rows), _) => {
+                let kept = |i: usize| gate.is_none_or(|g| g.gate[i] > 0.0);
+                let total: f64 = rows
+                    .to_vec1::<u32>()?
+                    .iter()
+                    .enumerate()
+                    .filter(|&(i, _)| kept(i))
+                    .map(|(_, &r)| self.query_neg_entropy[r as usize])
+                    .sum();
+                total / v.max(1) as f64
+            }
+            (None, None) => self.init_entropy,
+            (None, Some(g)) => g.init_entropy,
         };
-        Ok((cross, total / v.max(1) as f64))
+        Ok((cross, entropy))
     }
 }

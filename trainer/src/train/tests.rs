@@ -1117,7 +1117,7 @@ fn the_hidden_prior_holds_only_the_vertices_no_outline_shows_and_logs_their_kl()
     });
     let positions = data.template.positions.clone();
     let mut t = Trainer::new(data, cfg, false).unwrap();
-    let gate = t.hidden_gate.as_ref().unwrap().1.clone();
+    let gate = t.hidden_gate.as_ref().unwrap().gate.clone();
     // A middle ring (y = 0.5): the vertices facing the camera (+z) or away are hidden, those
     // on the sides (±x) are seen.
     for (i, p) in positions.iter().enumerate() {

@@ -179,6 +179,24 @@ pub(crate) struct MeshOutline {
     pub vertices: Vec<u32>,
 }
 
+/// Adds 1 to `counts[i]` for every vertex `i` on the projected outline ([`mesh_outline`]) of the
+/// posed mesh (`positions`, `triangles`, edge table `table`) seen by each of `cameras`: how many
+/// views could show a silhouette term that vertex.
+pub(crate) fn count_outline_views<'a>(
+    counts: &mut [u32],
+    cameras: impl IntoIterator<Item = &'a Camera>,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    table: &EdgeTable,
+) {
+    for camera in cameras {
+        let view = ViewGeometry::new(camera, positions);
+        for i in mesh_outline(camera, positions, triangles, table, &view).vertices {
+            counts[i as usize] += 1;
+        }
+    }
+}
+
 /// The silhouette edges of the posed mesh seen by `camera`, and their ends, that are on the
 /// projected outline (see the module docs).
 pub(crate) fn mesh_outline(
