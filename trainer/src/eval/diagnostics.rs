@@ -18,8 +18,8 @@
 use std::fmt::Write as _;
 
 use glam::Vec3;
-use skinfield_formats::PartLabel;
 use skinfield_formats::capture::Capture;
+use skinfield_formats::{Camera, PartLabel};
 
 use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s, sorted_influences};
 use crate::losses::silhouette::EdgeTable;
@@ -137,16 +137,47 @@ fn grouped_errors(
 /// for its training frames). Only the cameras and the true meshes are read; the set does not
 /// depend on the masks. A vertex at 0 is hidden from every training view (under clothing,
 /// between the legs) or always faces a camera: the silhouettes cannot see its weights.
+///
+/// Copies of one rest position (a mesh split at its UV or normal seams) are counted as one
+/// vertex and share its count, as training sees them (it welds such templates): on the split
+/// mesh a seam is an open border, which would count a copy on one side of the outline and not
+/// the other.
 #[must_use]
 pub fn truth_outline_views(capture: &Capture) -> Option<Vec<u32>> {
-    let triangles = &capture.template.triangles;
-    let edges = EdgeTable::new(capture.template.vertex_count(), triangles);
-    let mut views = vec![0u32; capture.template.vertex_count()];
-    for &frame in &capture.train_frames {
-        let posed = capture.evaluation_gt_mesh(frame).ok()?;
-        count_outline_views(&mut views, &capture.rig.cameras, &posed, triangles, &edges);
+    let posed = capture
+        .train_frames
+        .iter()
+        .map(|&frame| capture.evaluation_gt_mesh(frame).ok());
+    outline_views_by_position(
+        &capture.template.positions,
+        &capture.template.triangles,
+        &capture.rig.cameras,
+        posed,
+    )
+}
+
+/// [`truth_outline_views`] for any posed meshes of a template (`rest` positions, `triangles`):
+/// every mesh of `posed` seen by every camera, copies of one rest position counted once (`None`
+/// when a mesh is missing).
+fn outline_views_by_position(
+    rest: &[Vec3],
+    triangles: &[[u32; 3]],
+    cameras: &[Camera],
+    posed: impl IntoIterator<Item = Option<Vec<Vec3>>>,
+) -> Option<Vec<u32>> {
+    let welded = crate::heat::weld::weld(rest, triangles, 0.0);
+    let edges = EdgeTable::new(welded.representative.len(), &welded.triangles);
+    let mut views = vec![0u32; welded.representative.len()];
+    for mesh in posed {
+        let mesh = mesh?;
+        let positions: Vec<Vec3> = welded
+            .representative
+            .iter()
+            .map(|&i| mesh.get(i as usize).copied())
+            .collect::<Option<_>>()?;
+        count_outline_views(&mut views, cameras, &positions, &welded.triangles, &edges);
     }
-    Some(views)
+    Some(welded.of_input.iter().map(|&w| views[w as usize]).collect())
 }
 
 /// The ground-truth posed template of each of a list of frames.
@@ -557,6 +588,44 @@ mod tests {
         let margin = rows[0].1.outline_offset_px;
         assert!((margin - 1.0).abs() < 0.25, "{}", rows[0].1);
     }
+    #[test]
+    fn copies_of_a_position_share_the_count_of_the_welded_vertex() {
+        // A UV sphere seen from its side, and the same sphere split into one copy of each
+        // corner per triangle (a mesh cut at every face, as glTF files cut at their seams):
+        // every copy gets the count of the sphere's vertex at its position.
+        let (positions, triangles) =
+            crate::losses::silhouette::tests::uv_sphere(12, 24, 1.0, Vec3::ZERO);
+        let cameras = [
+            Camera::look_at("side", 64, 64, 1.0, Vec3::X * 5.0, Vec3::ZERO, Vec3::Y),
+            Camera::look_at("top", 64, 64, 1.0, Vec3::Y * 5.0, Vec3::ZERO, Vec3::Z),
+        ];
+        let whole =
+            outline_views_by_position(&positions, &triangles, &cameras, [Some(positions.clone())])
+                .unwrap();
+        let (mut split_positions, mut split_triangles, mut of_split) = (vec![], vec![], vec![]);
+        for t in &triangles {
+            let base = split_positions.len() as u32;
+            for &i in t {
+                split_positions.push(positions[i as usize]);
+                of_split.push(i as usize);
+            }
+            split_triangles.push([base, base + 1, base + 2]);
+        }
+        let split = outline_views_by_position(
+            &split_positions,
+            &split_triangles,
+            &cameras,
+            [Some(split_positions.clone())],
+        )
+        .unwrap();
+        assert!(whole.iter().filter(|&&n| n > 0).count() > 24, "{whole:?}");
+        for (k, &i) in of_split.iter().enumerate() {
+            assert_eq!(split[k], whole[i], "copy {k} of vertex {i}");
+        }
+        // A missing mesh gives no counts.
+        assert!(outline_views_by_position(&positions, &triangles, &cameras, [None]).is_none());
+    }
+
     #[test]
     fn outline_views_count_vertices_on_a_true_outline_and_split_the_errors() {
         let dir = tempfile::tempdir().unwrap();
