@@ -10,7 +10,8 @@ use skinfield_formats::StaticSkin;
 use skinfield_formats::capture::{Capture, MotionFile, load_capture, transform_to_array};
 use skinfield_trainer::eval::static_weights::write_static_weights;
 use skinfield_trainer::train::data::{
-    DataOptions, TrainData, initial_weights, static_train_data, train_data,
+    DataOptions, TrainData, full_resolution_vertex_count, initial_weights, static_train_data,
+    train_data,
 };
 use skinfield_trainer::train::plot::plot_log;
 use skinfield_trainer::train::stages::load_images;
@@ -245,12 +246,12 @@ pub fn for_stages(
         .context("moving SkinNet to the full-resolution template for stages 2–4")
 }
 
-/// Whether a SkinNet trained on `training_vertices` vertices already trains on every vertex of
-/// the capture's template (the training template was not simplified), so stages 2–4 need no
-/// full-resolution data of their own.
+/// Whether a SkinNet trained on `training_vertices` vertices already trains on the capture's
+/// full-resolution template (the training template was not simplified, only welded if it was
+/// split), so stages 2–4 need no full-resolution data of their own.
 #[must_use]
 pub fn trains_every_vertex(training_vertices: usize, capture: &Capture) -> bool {
-    training_vertices == capture.template.vertex_count()
+    training_vertices == full_resolution_vertex_count(&capture.template)
 }
 
 /// The training data of `options` rebuilt on the capture's full-resolution template (every

@@ -108,21 +108,49 @@ pub fn initial_weights(capture: &Capture) -> Result<StaticSkin, DataError> {
     }
 }
 
-/// Simplifies `template` to about `target` vertices (the runtime's simplifier, so the training
-/// template is what an engine's load-time LOD would be); returns the new template and, for each
-/// of its vertices, the index of the original vertex it is.
+/// The template SkinNet trains on: `template` simplified to about `target` vertices (the
+/// runtime's simplifier, so the training template is what an engine's load-time LOD would be;
+/// `target` 0 keeps every vertex); returns the new template and, for each of its vertices, the
+/// index of the original vertex it is.
 ///
-/// meshoptimizer never collapses a vertex where more than two copies of one position meet (a
-/// complex seam), so a mesh split at every face or material, as many exported characters are,
-/// cannot be simplified at all: the Witch's 13,884 vertices lie at 3,525 positions and came out
-/// at 13,880, and trained at five times the cost per iteration for nothing. When the simplifier
-/// ends more than [`SEAM_SLACK`] times the target, the template is welded by exact position
-/// first ([`weld_template`]) and that is simplified (or kept, when it is already at or below the
-/// target). Welding is not the default because it also joins surfaces a mesh keeps apart on
-/// purpose where they touch (the built-in skirt's waistband lies on the body), and where the
-/// simplifier copes there is nothing to gain.
+/// A template split into copies of its positions ([`split_template_weld`]: at its faces, UV
+/// charts or materials, as most exported characters are) is welded first, at any target. On the
+/// split mesh every seam is an open border: the silhouette loss's outline test then drops or
+/// adds copies where a seam meets the outline (of the vertices some true training outline
+/// shows, it missed a quarter on the zoo's Fox and added a tenth on CesiumMan), and each copy is
+/// one more row of the network for the same point. SkinNet is a function of position, so the copies' weights are the weld's.
+///
+/// Otherwise, meshoptimizer never collapses a vertex where more than two copies of one position
+/// meet (a complex seam), so a mesh with a few such seams may not simplify to its target: when
+/// the simplifier ends more than [`SEAM_SLACK`] times the target, the template is welded by
+/// exact position first ([`weld_template`]) and that is simplified (or kept, when it is already
+/// at or below the target). Welding is not the default for the other meshes because it also
+/// joins surfaces a mesh keeps apart on purpose where they touch (the built-in skirt's waistband
+/// lies on the body), and where the simplifier copes there is nothing to gain.
 #[must_use]
 pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u32>) {
+    let Some(WeldedTemplate {
+        template: welded,
+        representative,
+        ..
+    }) = split_template_weld(template)
+    else {
+        return simplify_unsplit(template, target);
+    };
+    let (simplified, source) = simplify_unsplit(&welded, target);
+    let source = source.iter().map(|&w| representative[w as usize]).collect();
+    (simplified, source)
+}
+
+/// The number of vertices SkinNet trains on at full resolution ([`simplify_template`] with
+/// target 0): the positions of a split template, every vertex of the others.
+#[must_use]
+pub fn full_resolution_vertex_count(template: &Template) -> usize {
+    split_template_weld(template).map_or(template.vertex_count(), |w| w.template.vertex_count())
+}
+
+/// [`simplify_template`] for a template not split into copies of its positions.
+fn simplify_unsplit(template: &Template, target: usize) -> (Template, Vec<u32>) {
     let n = template.vertex_count();
     let identity = || (template.clone(), (0..n as u32).collect());
     if target == 0 || target >= n {
@@ -234,18 +262,19 @@ pub fn weld_template(template: &Template) -> Option<WeldedTemplate> {
     })
 }
 
-/// The template the static baseline trains on when `template` is split into copies of its
-/// positions (at its faces or UV charts: more than [`SPLIT_COPIES`] vertices per position): its
-/// weld, so that copies share one weight set. `None` keeps the template.
+/// The weld of a template split into copies of its positions (at its faces or UV charts: more
+/// than [`SPLIT_COPIES`] vertices per position), which SkinNet ([`simplify_template`]) and the
+/// static baseline ([`static_train_data`]) train on. `None` keeps the template.
 ///
 /// Static weights are free per vertex and the Laplacian couples only the vertices of one
-/// triangle, so on a mesh split at every face the copies of a position drift apart and the
-/// surface tears wherever that explains a silhouette (the Witch's static baseline ended worse
-/// than bone heat). SkinNet does not need this: it is a function of position, so copies get the
-/// same weights. Welding is not used for meshes with a few coincident vertices only (the
-/// built-in skirt's waistband lies on the body), for the reason given at [`simplify_template`].
+/// triangle, so on a mesh split at every face the copies of a position would drift apart and
+/// the surface tear wherever that explains a silhouette (the Witch's static baseline ended worse
+/// than bone heat); SkinNet, a function of position, gives copies the same weights, but the
+/// silhouette loss's outline test sees a seam as an open border. Welding is not used for meshes
+/// with a few coincident vertices only (the built-in skirt's waistband lies on the body), for
+/// the reason given at [`simplify_template`].
 #[must_use]
-pub fn static_training_template(template: &Template) -> Option<WeldedTemplate> {
+pub fn split_template_weld(template: &Template) -> Option<WeldedTemplate> {
     let n = template.vertex_count() as f64;
     weld_template(template).filter(|w| w.template.vertex_count() as f64 * SPLIT_COPIES < n)
 }
@@ -256,7 +285,7 @@ pub fn static_training_template(template: &Template) -> Option<WeldedTemplate> {
 pub const SPLIT_COPIES: f64 = 1.25;
 
 /// The static baseline's training data: [`train_data`] at full resolution, on the weld of a
-/// template split into copies of its positions ([`static_training_template`]; the initial weights
+/// template split into copies of its positions ([`split_template_weld`]; the initial weights
 /// of each position are its first copy's), with that weld, whose [`WeldedTemplate::expand`]
 /// gives the trained weights back to every copy.
 pub fn static_train_data(
@@ -267,7 +296,7 @@ pub fn static_train_data(
         train_vertices: 0,
         ..DataOptions::default()
     };
-    let Some(welded) = static_training_template(&capture.template) else {
+    let Some(welded) = split_template_weld(&capture.template) else {
         return Ok((train_data(capture, initial, &options)?, None));
     };
     // The weld reads the initial weights by vertex before `train_data` would check them.
@@ -311,7 +340,8 @@ pub fn train_data(
     let (template, source) = simplify_template(&capture.template, options.train_vertices);
     let dense = initial.to_dense();
     let full = &capture.template;
-    let queries = if source.len() < full.vertex_count() {
+    // Query cells stand in for the vertices a simplification removed; a weld removed none.
+    let queries = if template.vertex_count() < full_resolution_vertex_count(full) {
         let normals = if full.normals.len() == full.vertex_count() {
             full.normals.clone()
         } else {
@@ -493,9 +523,9 @@ mod tests {
         }
         // The static baseline trains on the weld of a split mesh, and on the mesh itself
         // otherwise.
-        let for_static = static_training_template(&split).unwrap();
+        let for_static = split_template_weld(&split).unwrap();
         assert_eq!(for_static.template.vertex_count(), t.vertex_count());
-        assert!(static_training_template(&t).is_none());
+        assert!(split_template_weld(&t).is_none());
     }
 
     #[test]
@@ -581,5 +611,51 @@ mod tests {
             assert_eq!(row, &trained[w * j..(w + 1) * j]);
             assert_eq!(data.template.positions[w], split.positions[copy]);
         }
+    }
+
+    /// SkinNet's training data of a capture whose template is split at every face: the weld at
+    /// full resolution (no query cells: a weld removes no point of the surface), each position
+    /// at its first copy's initial weights, and a simplification of the weld below it.
+    #[test]
+    fn skinnet_trains_a_split_template_on_its_weld() {
+        let (_dir, capture, initial) = tiny_capture();
+        let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
+        let (split, corners) = split_at_every_face(&capture.template);
+        let dense = initial.to_dense();
+        let split_initial = StaticSkin::from_dense(&gather_rows(&dense, j, &corners), j).unwrap();
+        let split_capture = Capture {
+            template: split.clone(),
+            ..capture.clone()
+        };
+        assert_eq!(full_resolution_vertex_count(&split), n);
+        assert_eq!(full_resolution_vertex_count(&capture.template), n);
+        let options = |train_vertices| DataOptions {
+            train_vertices,
+            ..DataOptions::default()
+        };
+        let full = train_data(&split_capture, &split_initial, &options(0)).unwrap();
+        assert_eq!(full.template.vertex_count(), n);
+        assert_eq!(
+            full.template.triangles.len(),
+            capture.template.triangles.len()
+        );
+        assert!(full.queries.is_none());
+        let (_, source) = simplify_template(&split, 0);
+        for (w, &copy) in source.iter().enumerate() {
+            assert_eq!(full.template.positions[w], split.positions[copy as usize]);
+            let original = corners[copy as usize] as usize;
+            let rows = full.init_weights[w * j..(w + 1) * j]
+                .iter()
+                .zip(&dense[original * j..(original + 1) * j]);
+            for (got, want) in rows {
+                assert!((got - want).abs() < 1e-6, "vertex {w}: {got} vs {want}");
+            }
+        }
+        // Simplified below the weld: query cells over every copy of the split mesh.
+        let coarse = train_data(&split_capture, &split_initial, &options(n / 3)).unwrap();
+        assert!(coarse.template.vertex_count() < n / 2);
+        let q = coarse.queries.as_ref().unwrap();
+        assert_eq!(q.positions.len(), split.vertex_count());
+        assert_eq!(q.training_vertex_count(), coarse.template.vertex_count());
     }
 }
