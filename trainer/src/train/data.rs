@@ -420,6 +420,20 @@ mod tests {
         (dir, capture, initial)
     }
 
+    /// `capture` with its template split at every face ([`split_at_every_face`]), the initial
+    /// weights carried to every copy, and the vertex of the original each copy is.
+    fn split_capture(capture: &Capture, initial: &StaticSkin) -> (Capture, StaticSkin, Vec<u32>) {
+        let j = capture.skeleton.len();
+        let (split, corners) = split_at_every_face(&capture.template);
+        let split_initial =
+            StaticSkin::from_dense(&gather_rows(&initial.to_dense(), j, &corners), j).unwrap();
+        let split_capture = Capture {
+            template: split,
+            ..capture.clone()
+        };
+        (split_capture, split_initial, corners)
+    }
+
     /// `t` split at every face (each triangle its own three vertices, as exporters write
     /// flat-shaded or per-material meshes), and the vertex of `t` each split vertex copies.
     fn split_at_every_face(t: &Template) -> (Template, Vec<u32>) {
@@ -572,13 +586,9 @@ mod tests {
         assert!(none.is_none());
         assert_eq!(same.template.vertex_count(), n);
 
-        let (split, corners) = split_at_every_face(&capture.template);
         let dense = initial.to_dense();
-        let split_initial = StaticSkin::from_dense(&gather_rows(&dense, j, &corners), j).unwrap();
-        let split_capture = Capture {
-            template: split.clone(),
-            ..capture.clone()
-        };
+        let (split_capture, split_initial, corners) = split_capture(&capture, &initial);
+        let split = &split_capture.template;
         // Initial weights of another template: a typed error (they are read before
         // `train_data` would check them).
         assert!(matches!(
@@ -620,14 +630,10 @@ mod tests {
     fn skinnet_trains_a_split_template_on_its_weld() {
         let (_dir, capture, initial) = tiny_capture();
         let (n, j) = (capture.template.vertex_count(), capture.skeleton.len());
-        let (split, corners) = split_at_every_face(&capture.template);
         let dense = initial.to_dense();
-        let split_initial = StaticSkin::from_dense(&gather_rows(&dense, j, &corners), j).unwrap();
-        let split_capture = Capture {
-            template: split.clone(),
-            ..capture.clone()
-        };
-        assert_eq!(full_resolution_vertex_count(&split), n);
+        let (split_capture, split_initial, corners) = split_capture(&capture, &initial);
+        let split = &split_capture.template;
+        assert_eq!(full_resolution_vertex_count(split), n);
         assert_eq!(full_resolution_vertex_count(&capture.template), n);
         let options = |train_vertices| DataOptions {
             train_vertices,
@@ -640,7 +646,7 @@ mod tests {
             capture.template.triangles.len()
         );
         assert!(full.queries.is_none());
-        let (_, source) = simplify_template(&split, 0);
+        let (_, source) = simplify_template(split, 0);
         for (w, &copy) in source.iter().enumerate() {
             assert_eq!(full.template.positions[w], split.positions[copy as usize]);
             let original = corners[copy as usize] as usize;
