@@ -139,9 +139,12 @@ fn grouped_errors(
 /// between the legs) or always faces a camera: the silhouettes cannot see its weights.
 ///
 /// Copies of one rest position (a mesh split at its UV or normal seams) are counted as one
-/// vertex and share its count, as training sees them (it welds such templates): on the split
-/// mesh a seam is an open border, which would count a copy on one side of the outline and not
-/// the other.
+/// vertex and share its count: on the split mesh a seam is an open border, which would count a
+/// copy on one side of the outline and not the other. That is what training sees of a split
+/// template (it trains on the weld); a template training keeps unwelded (fewer copies than
+/// [`crate::train::data::SPLIT_COPIES`] asks, such as the built-in character, 10,000 vertices
+/// at 9,982 positions where its skirt's waistband lies on the body) is welded here for the
+/// count only.
 #[must_use]
 pub fn truth_outline_views(capture: &Capture) -> Option<Vec<u32>> {
     let posed = capture
