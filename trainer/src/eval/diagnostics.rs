@@ -24,7 +24,9 @@ use skinfield_formats::{Camera, PartLabel};
 use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s, sorted_influences};
 use crate::losses::silhouette::EdgeTable;
 use crate::losses::silhouette::edges::count_outline_views;
-use crate::train::data::{DataError, DataOptions, TrainData, initial_weights, train_data};
+use crate::train::data::{
+    DataError, DataOptions, TrainData, initial_weights, split_template_weld, train_data,
+};
 use crate::train::validation::{ValidationScore, score_posed};
 
 /// A diagnostic could not be computed.
@@ -356,16 +358,34 @@ pub fn worst_vertices_markdown(
 /// The image terms of the ground truth and of each method (row name, score) on every
 /// `stride`-th training frame, all views, at full template resolution. The truth row is
 /// `truth`; it is left out when the capture has no ground truth for its training frames.
+///
+/// A template split into copies of its positions is scored on its weld, as training sees it
+/// ([`split_template_weld`]): on the split mesh every seam is an open border, which the
+/// outline test would take for the surface's edge.
 pub fn terms_on_truth(
     capture: &Capture,
     methods: &[Skinning],
     stride: usize,
 ) -> Result<Vec<(String, ValidationScore)>, DiagnosticsError> {
-    let triangles = &capture.template.triangles;
-    let edges = EdgeTable::new(capture.template.vertex_count(), triangles);
+    let weld = split_template_weld(&capture.template);
+    let (triangles, vertex_count) = match &weld {
+        Some(w) => (&w.template.triangles, w.template.vertex_count()),
+        None => (&capture.template.triangles, capture.template.vertex_count()),
+    };
+    // Each posed copy of the template reduced to the weld's vertices (their representatives).
+    let on_weld = |posed: Vec<Vec3>| match &weld {
+        Some(w) => w
+            .representative
+            .iter()
+            .map(|&i| posed[i as usize])
+            .collect(),
+        None => posed,
+    };
+    let edges = EdgeTable::new(vertex_count, triangles);
     let mut rows = Vec::new();
     let (data, truth) = frames_with_truth(capture, stride)?;
     if let Some(truth) = truth {
+        let truth: Vec<Vec<Vec3>> = truth.into_iter().map(on_weld).collect();
         rows.push((
             "truth".to_string(),
             score_posed(&data.frames, &truth, triangles, &edges, None),
@@ -374,7 +394,7 @@ pub fn terms_on_truth(
     for m in methods {
         let prepared = PreparedSkinning::new(capture, m)?;
         let posed = (capture.train_frames.iter().step_by(stride.max(1)))
-            .map(|&f| prepared.pose_frame(capture, f))
+            .map(|&f| prepared.pose_frame(capture, f).map(on_weld))
             .collect::<Result<Vec<_>, _>>()?;
         rows.push((
             m.method_name().to_string(),
@@ -591,6 +611,37 @@ mod tests {
         let margin = rows[0].1.outline_offset_px;
         assert!((margin - 1.0).abs() < 0.25, "{}", rows[0].1);
     }
+    #[test]
+    fn a_template_split_at_every_face_scores_as_the_unsplit_one() {
+        // Cut at every face, every edge of the mesh is a seam: scored on the split mesh, every
+        // vertex would lie on an open border and count for the outline.
+        let dir = tempfile::tempdir().unwrap();
+        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
+        let capture = load_capture(dir.path()).unwrap();
+        let initial = initial_weights(&capture).unwrap();
+        let (split, split_initial, _) =
+            crate::train::data::tests::split_capture(&capture, &initial);
+        let split = Capture {
+            initial_weights: Some(split_initial),
+            ..split
+        };
+        let whole = terms_on_truth(&capture, &[Skinning::Initial], 1).unwrap();
+        let cut = terms_on_truth(&split, &[Skinning::Initial], 1).unwrap();
+        // The capture's ground truth is for the unsplit vertices, so the split one has no truth
+        // row.
+        assert_eq!(cut.len(), 1);
+        let (whole, cut) = (whole[1].1, cut[0].1);
+        assert_eq!(whole.views, cut.views);
+        for (a, b) in [
+            (whole.silhouette_px, cut.silhouette_px),
+            (whole.boundary_px, cut.boundary_px),
+            (whole.contour_px, cut.contour_px),
+            (whole.iou, cut.iou),
+        ] {
+            assert!((a - b).abs() < 1e-3 * a.abs().max(1.0), "{whole} vs {cut}");
+        }
+    }
+
     #[test]
     fn copies_of_a_position_share_the_count_of_the_welded_vertex() {
         // A UV sphere seen from its side, and the same sphere split into one copy of each

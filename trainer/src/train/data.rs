@@ -408,7 +408,7 @@ pub fn train_data(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A tiny synthetic capture (its folder kept alive by the returned guard) and its bone heat.
@@ -422,7 +422,10 @@ mod tests {
 
     /// `capture` with its template split at every face ([`split_at_every_face`]), the initial
     /// weights carried to every copy, and the vertex of the original each copy is.
-    fn split_capture(capture: &Capture, initial: &StaticSkin) -> (Capture, StaticSkin, Vec<u32>) {
+    pub(crate) fn split_capture(
+        capture: &Capture,
+        initial: &StaticSkin,
+    ) -> (Capture, StaticSkin, Vec<u32>) {
         let j = capture.skeleton.len();
         let (split, corners) = split_at_every_face(&capture.template);
         let split_initial =
