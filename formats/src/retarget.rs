@@ -23,8 +23,10 @@
 //!    ([`Retarget::in_place`] keeps only its vertical part).
 //!
 //! The rest of each skeleton is its bind pose ([`Skeleton::bind_local`]: the pose its mesh was
-//! modelled in). Scales are taken as uniform: world rotations come from the decomposed world
-//! matrices. Retargeting is an import-time step (it allocates per call); an engine that plays
+//! modelled in). World rotations come from the decomposed world matrices, which is exact only
+//! for uniform scales: a joint whose world scale differs between its axes (by more than
+//! [`SCALE_TOLERANCE`], or mirrors one of them) in either rest pose, or in a source pose, is
+//! refused with [`RetargetError::NonUniformScale`] rather than retargeted wrong. Retargeting is an import-time step (it allocates per call); an engine that plays
 //! retargeted clips bakes them once.
 
 use alloc::string::String;
@@ -57,6 +59,48 @@ pub enum RetargetError {
     /// The retargeted pose is not finite (a degenerate world matrix on the way).
     #[error("the retargeted pose of target joint `{0}` is not finite")]
     NonFinite(String),
+    /// A joint's world matrix scales its axes unequally (or mirrors one), so no rotation
+    /// describes its orientation: in the target's rest pose, the source's, or a source pose.
+    #[error(
+        "{skeleton} joint `{joint}` has the world scale ({}, {}, {}) in {}; retargeting needs \
+         uniform scales",
+        scale[0], scale[1], scale[2],
+        if *posed { "a pose to retarget" } else { "its rest pose" }
+    )]
+    NonUniformScale {
+        /// `"source"` or `"target"`.
+        skeleton: &'static str,
+        /// The joint's name.
+        joint: String,
+        /// Its world scale along its three axes (a negative one: mirrored).
+        scale: [f32; 3],
+        /// Whether it is a source pose given to [`Retarget::apply`] (otherwise a rest pose).
+        posed: bool,
+    },
+}
+
+/// Largest relative difference between a joint's three world scales that counts as uniform.
+pub const SCALE_TOLERANCE: f32 = 1e-3;
+
+/// `Err` naming `joint` of `skeleton` if `m` scales its axes unequally or mirrors one.
+fn check_uniform(
+    m: &Mat4,
+    skeleton: &Skeleton,
+    which: &'static str,
+    joint: usize,
+    posed: bool,
+) -> Result<(), RetargetError> {
+    let (scale, _, _) = m.to_scale_rotation_translation();
+    let largest = scale.abs().max_element();
+    if (scale.max_element() - scale.min_element()) <= SCALE_TOLERANCE * largest {
+        return Ok(());
+    }
+    Err(RetargetError::NonUniformScale {
+        skeleton: which,
+        joint: skeleton.names()[joint].clone(),
+        scale: scale.to_array(),
+        posed,
+    })
 }
 
 /// A set-up retargeting from one skeleton to another; [`Retarget::apply`] converts poses.
@@ -110,8 +154,14 @@ impl Retarget {
                 return Err(RetargetError::DuplicateTargetJoint(t_name.clone()));
             }
         }
-        let (source_rest_rotation, source_rest_position) = world_rest(source);
-        let (target_rest_rotation, target_rest_position) = world_rest(target);
+        // The source's unmapped joints drive nothing; every target joint's rotation is used
+        // (as the parent of the next).
+        let driving: Vec<bool> = (0..source.len())
+            .map(|s| source_of.contains(&Some(s)))
+            .collect();
+        let (source_rest_rotation, source_rest_position) =
+            world_rest(source, "source", |s| driving[s])?;
+        let (target_rest_rotation, target_rest_position) = world_rest(target, "target", |_| true)?;
         let translates: Vec<bool> = (0..target.len())
             .map(|t| {
                 source_of[t].is_some() && !ancestors(target, t).any(|a| source_of[a].is_some())
@@ -219,6 +269,7 @@ impl Retarget {
                 None => self.target.base(),
             };
             if let Some(s) = self.source_of[t] {
+                check_uniform(&source_world[s], &self.source, "source", s, true)?;
                 let (_, rotation, position) = source_world[s].to_scale_rotation_translation();
                 let delta = rotation * self.source_rest_inverse[s];
                 let wanted =
@@ -244,26 +295,36 @@ impl Retarget {
     }
 }
 
-/// World rotations and positions of a skeleton's bind pose.
-fn world_rest(skeleton: &Skeleton) -> (Vec<Quat>, Vec<Vec3>) {
+/// World rotations and positions of a skeleton's bind pose (`which` names it in errors); the
+/// joints `checked` selects must have uniform world scales.
+fn world_rest(
+    skeleton: &Skeleton,
+    which: &'static str,
+    checked: impl Fn(usize) -> bool,
+) -> Result<(Vec<Quat>, Vec<Vec3>), RetargetError> {
     let mut world = vec![Mat4::IDENTITY; skeleton.len()];
     // The bind pose of a valid skeleton always fits it.
     if skeleton
         .world_matrices(&skeleton.bind_pose(), &mut world)
         .is_err()
     {
-        return (
+        return Ok((
             vec![Quat::IDENTITY; skeleton.len()],
             vec![Vec3::ZERO; skeleton.len()],
-        );
+        ));
     }
-    world
+    for (j, m) in world.iter().enumerate() {
+        if checked(j) {
+            check_uniform(m, skeleton, which, j, false)?;
+        }
+    }
+    Ok(world
         .iter()
         .map(|m| {
             let (_, r, p) = m.to_scale_rotation_translation();
             (r, p)
         })
-        .unzip()
+        .unzip())
 }
 
 /// The ancestors of `joint`, nearest first.

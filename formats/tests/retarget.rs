@@ -259,3 +259,65 @@ fn bad_maps_and_poses_are_typed_errors() {
         .is_ok()
     );
 }
+
+/// `skeleton` with joint `j`'s bind scale set to `scale`.
+fn with_bind_scale(skeleton: &Skeleton, j: usize, scale: Vec3) -> Skeleton {
+    let mut bind = skeleton.bind_local().to_vec();
+    bind[j].scale = scale;
+    Skeleton::new(
+        skeleton.names().to_vec(),
+        skeleton.parents().to_vec(),
+        bind,
+        None,
+        None,
+        skeleton.base(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn unequal_or_mirrored_scales_are_refused_and_uniform_ones_retarget() {
+    let source = humanoid("", 1.0, Mat4::IDENTITY, Quat::IDENTITY);
+    let target = humanoid("t_", 1.0, Mat4::IDENTITY, Quat::IDENTITY);
+    let map = identity_map("t_");
+    // A uniform scale (a rig modelled in centimetres, scaled at its hips) is a similarity.
+    let uniform = with_bind_scale(&target, 0, Vec3::splat(0.01));
+    assert!(Retarget::new(&source, &uniform, &map).is_ok());
+    // The target's chest squashed: it and everything above it (the neck first) has no rotation.
+    let squashed = with_bind_scale(&target, 2, Vec3::new(1.0, 2.0, 1.0));
+    match Retarget::new(&source, &squashed, &map).unwrap_err() {
+        RetargetError::NonUniformScale {
+            skeleton,
+            joint,
+            scale,
+            posed,
+        } => {
+            assert_eq!(
+                (skeleton, joint.as_str(), posed),
+                ("target", "t_chest", false)
+            );
+            assert!((scale[1] - 2.0).abs() < 1e-5, "{scale:?}");
+        }
+        e => panic!("{e}"),
+    }
+    // A mirrored source hip, driving a target joint.
+    let mirrored = with_bind_scale(&source, 11, Vec3::new(-1.0, 1.0, 1.0));
+    let err = Retarget::new(&mirrored, &target, &map).unwrap_err();
+    assert!(
+        matches!(&err, RetargetError::NonUniformScale { skeleton: "source", joint, .. } if joint == "l_hip"),
+        "{err}"
+    );
+    // An unmapped source joint may scale as it likes: it drives nothing.
+    let only_hips = [("t_hips".to_owned(), "hips".to_owned())];
+    assert!(Retarget::new(&mirrored, &target, &only_hips).is_ok());
+    // A source pose whose spine stretches along one axis.
+    let retarget = Retarget::new(&source, &target, &map).unwrap();
+    let mut stretched = source.bind_pose();
+    stretched.locals[1].scale = Vec3::new(1.0, 1.0, 3.0);
+    let err = retarget.apply(&stretched).unwrap_err();
+    assert!(
+        matches!(&err, RetargetError::NonUniformScale { skeleton: "source", joint, posed: true, .. } if joint == "spine"),
+        "{err}"
+    );
+    assert!(err.to_string().contains("a pose to retarget"), "{err}");
+}
