@@ -26,8 +26,9 @@
 //! modelled in). World rotations come from the decomposed world matrices, which is exact only
 //! for uniform scales: a joint whose world scale differs between its axes (by more than
 //! [`SCALE_TOLERANCE`], or mirrors one of them) in either rest pose, or in a source pose, is
-//! refused with [`RetargetError::NonUniformScale`] rather than retargeted wrong. Retargeting is an import-time step (it allocates per call); an engine that plays
-//! retargeted clips bakes them once.
+//! refused with [`RetargetError::NonUniformScale`] rather than retargeted wrong. Retargeting is
+//! an import-time step (it allocates per call); an engine that plays retargeted clips bakes them
+//! once.
 
 use alloc::string::String;
 use alloc::vec;
