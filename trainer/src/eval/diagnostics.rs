@@ -476,11 +476,17 @@ mod tests {
     use super::*;
     use skinfield_formats::capture::load_capture;
 
-    #[test]
-    fn parts_partition_the_vertices_and_average_to_the_per_vertex_mean() {
+    /// The tiny synthetic capture, loaded (its folder kept alive by the returned guard).
+    fn tiny_capture() -> (tempfile::TempDir, Capture) {
         let dir = tempfile::tempdir().unwrap();
         crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
         let capture = load_capture(dir.path()).unwrap();
+        (dir, capture)
+    }
+
+    #[test]
+    fn parts_partition_the_vertices_and_average_to_the_per_vertex_mean() {
+        let (_dir, capture) = tiny_capture();
         let parts = part_errors(&capture, &Skinning::Initial).unwrap();
         let v = capture.template.vertex_count();
         assert_eq!(parts.iter().map(|p| p.vertices).sum::<usize>(), v);
@@ -519,9 +525,7 @@ mod tests {
 
     #[test]
     fn worst_vertices_are_the_frames_largest_distances_with_their_joints() {
-        let dir = tempfile::tempdir().unwrap();
-        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let (_dir, capture) = tiny_capture();
         let worst =
             worst_vertices(&capture, &Skinning::Initial, WorstMeasure::VertexToVertex).unwrap();
         assert_eq!(worst.len(), capture.test_frames.len());
@@ -584,9 +588,7 @@ mod tests {
 
     #[test]
     fn the_truth_scores_lower_than_bone_heat_on_its_own_masks() {
-        let dir = tempfile::tempdir().unwrap();
-        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let (_dir, capture) = tiny_capture();
         let rows = terms_on_truth(&capture, &[Skinning::Initial], 1).unwrap();
         assert_eq!(rows[0].0, "truth");
         assert_eq!(rows[1].0, "initial");
@@ -615,9 +617,7 @@ mod tests {
     fn a_template_split_at_every_face_scores_as_the_unsplit_one() {
         // Cut at every face, every edge of the mesh is a seam: scored on the split mesh, every
         // vertex would lie on an open border and count for the outline.
-        let dir = tempfile::tempdir().unwrap();
-        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let (_dir, capture) = tiny_capture();
         let initial = initial_weights(&capture).unwrap();
         let (split, split_initial, _) =
             crate::train::data::tests::split_capture(&capture, &initial);
@@ -682,9 +682,7 @@ mod tests {
 
     #[test]
     fn outline_views_count_vertices_on_a_true_outline_and_split_the_errors() {
-        let dir = tempfile::tempdir().unwrap();
-        crate::synth::synthesize(dir.path(), &crate::synth::SynthConfig::tiny()).unwrap();
-        let capture = load_capture(dir.path()).unwrap();
+        let (_dir, capture) = tiny_capture();
         let views = truth_outline_views(&capture).unwrap();
         let v = capture.template.vertex_count();
         assert_eq!(views.len(), v);
