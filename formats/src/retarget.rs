@@ -83,15 +83,15 @@ pub enum RetargetError {
 /// Largest relative difference between a joint's three world scales that counts as uniform.
 pub const SCALE_TOLERANCE: f32 = 1e-3;
 
-/// `Err` naming `joint` of `skeleton` if `m` scales its axes unequally or mirrors one.
+/// `Err` naming `joint` of `skeleton` if its world `scale` (from the decomposed world matrix)
+/// differs between the axes or mirrors one.
 fn check_uniform(
-    m: &Mat4,
+    scale: Vec3,
     skeleton: &Skeleton,
     which: &'static str,
     joint: usize,
     posed: bool,
 ) -> Result<(), RetargetError> {
-    let (scale, _, _) = m.to_scale_rotation_translation();
     let largest = scale.abs().max_element();
     if (scale.max_element() - scale.min_element()) <= SCALE_TOLERANCE * largest {
         return Ok(());
@@ -157,9 +157,10 @@ impl Retarget {
         }
         // The source's unmapped joints drive nothing; every target joint's rotation is used
         // (as the parent of the next).
-        let driving: Vec<bool> = (0..source.len())
-            .map(|s| source_of.contains(&Some(s)))
-            .collect();
+        let mut driving = vec![false; source.len()];
+        for &s in source_of.iter().flatten() {
+            driving[s] = true;
+        }
         let (source_rest_rotation, source_rest_position) =
             world_rest(source, "source", |s| driving[s])?;
         let (target_rest_rotation, target_rest_position) = world_rest(target, "target", |_| true)?;
@@ -270,8 +271,8 @@ impl Retarget {
                 None => self.target.base(),
             };
             if let Some(s) = self.source_of[t] {
-                check_uniform(&source_world[s], &self.source, "source", s, true)?;
-                let (_, rotation, position) = source_world[s].to_scale_rotation_translation();
+                let (scale, rotation, position) = source_world[s].to_scale_rotation_translation();
+                check_uniform(scale, &self.source, "source", s, true)?;
                 let delta = rotation * self.source_rest_inverse[s];
                 let wanted =
                     (self.frame * delta * self.frame.inverse()) * self.target_aligned_rest[t];
@@ -314,18 +315,17 @@ fn world_rest(
             vec![Vec3::ZERO; skeleton.len()],
         ));
     }
+    let mut rotations = Vec::with_capacity(world.len());
+    let mut positions = Vec::with_capacity(world.len());
     for (j, m) in world.iter().enumerate() {
+        let (scale, rotation, position) = m.to_scale_rotation_translation();
         if checked(j) {
-            check_uniform(m, skeleton, which, j, false)?;
+            check_uniform(scale, skeleton, which, j, false)?;
         }
+        rotations.push(rotation);
+        positions.push(position);
     }
-    Ok(world
-        .iter()
-        .map(|m| {
-            let (_, r, p) = m.to_scale_rotation_translation();
-            (r, p)
-        })
-        .unzip())
+    Ok((rotations, positions))
 }
 
 /// The ancestors of `joint`, nearest first.
