@@ -24,9 +24,7 @@ use skinfield_formats::{Camera, PartLabel};
 use super::{EvalError, PreparedSkinning, Skinning, per_vertex_m2s, sorted_influences};
 use crate::losses::silhouette::EdgeTable;
 use crate::losses::silhouette::edges::count_outline_views;
-use crate::train::data::{
-    DataError, DataOptions, TrainData, initial_weights, split_template_weld, train_data,
-};
+use crate::train::data::{DataError, DataOptions, TrainData, initial_weights, train_data};
 use crate::train::validation::{ValidationScore, score_posed};
 
 /// A diagnostic could not be computed.
@@ -360,32 +358,24 @@ pub fn worst_vertices_markdown(
 /// `truth`; it is left out when the capture has no ground truth for its training frames.
 ///
 /// A template split into copies of its positions is scored on its weld, as training sees it
-/// ([`split_template_weld`]): on the split mesh every seam is an open border, which the
+/// ([`split_template_weld`](crate::train::data::split_template_weld)): on the split mesh every seam is an open border, which the
 /// outline test would take for the surface's edge.
 pub fn terms_on_truth(
     capture: &Capture,
     methods: &[Skinning],
     stride: usize,
 ) -> Result<Vec<(String, ValidationScore)>, DiagnosticsError> {
-    let weld = split_template_weld(&capture.template);
-    let (triangles, vertex_count) = match &weld {
-        Some(w) => (&w.template.triangles, w.template.vertex_count()),
-        None => (&capture.template.triangles, capture.template.vertex_count()),
-    };
-    // Each posed copy of the template reduced to the weld's vertices (their representatives).
-    let on_weld = |posed: Vec<Vec3>| match &weld {
-        Some(w) => w
-            .representative
-            .iter()
-            .map(|&i| posed[i as usize])
-            .collect(),
-        None => posed,
-    };
-    let edges = EdgeTable::new(vertex_count, triangles);
-    let mut rows = Vec::new();
+    // At full resolution the training template is the weld of a split template and the
+    // template itself otherwise; each posed copy of the capture's template is read on it.
     let (data, truth) = frames_with_truth(capture, stride)?;
+    let triangles = &data.template.triangles;
+    let on_training_template = |posed: Vec<Vec3>| -> Vec<Vec3> {
+        data.source.iter().map(|&i| posed[i as usize]).collect()
+    };
+    let edges = EdgeTable::new(data.template.vertex_count(), triangles);
+    let mut rows = Vec::new();
     if let Some(truth) = truth {
-        let truth: Vec<Vec<Vec3>> = truth.into_iter().map(on_weld).collect();
+        let truth: Vec<Vec<Vec3>> = truth.into_iter().map(on_training_template).collect();
         rows.push((
             "truth".to_string(),
             score_posed(&data.frames, &truth, triangles, &edges, None),
@@ -394,7 +384,7 @@ pub fn terms_on_truth(
     for m in methods {
         let prepared = PreparedSkinning::new(capture, m)?;
         let posed = (capture.train_frames.iter().step_by(stride.max(1)))
-            .map(|&f| prepared.pose_frame(capture, f).map(on_weld))
+            .map(|&f| prepared.pose_frame(capture, f).map(on_training_template))
             .collect::<Result<Vec<_>, _>>()?;
         rows.push((
             m.method_name().to_string(),

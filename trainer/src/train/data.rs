@@ -50,6 +50,10 @@ pub struct TrainData {
     pub skeleton: Skeleton,
     /// The (possibly reduced-resolution) template.
     pub template: Template,
+    /// Per vertex of `template`, the vertex of the capture's template it is (the first copy of
+    /// its position where a split template was welded): how a mesh posed on the capture's
+    /// template is read on this one.
+    pub source: Vec<u32>,
     /// Initial weights, dense `[V, J]` row-major (bone heat or the asset's).
     pub init_weights: Vec<f32>,
     /// Training frames.
@@ -129,16 +133,23 @@ pub fn initial_weights(capture: &Capture) -> Result<StaticSkin, DataError> {
 /// lies on the body), and where the simplifier copes there is nothing to gain.
 #[must_use]
 pub fn simplify_template(template: &Template, target: usize) -> (Template, Vec<u32>) {
-    let Some(WeldedTemplate {
-        template: welded,
-        representative,
-        ..
-    }) = split_template_weld(template)
-    else {
+    simplify_on_weld(template, split_template_weld(template).as_ref(), target)
+}
+
+/// [`simplify_template`] given the template's [`split_template_weld`] (`None`: not split).
+fn simplify_on_weld(
+    template: &Template,
+    weld: Option<&WeldedTemplate>,
+    target: usize,
+) -> (Template, Vec<u32>) {
+    let Some(weld) = weld else {
         return simplify_unsplit(template, target);
     };
-    let (simplified, source) = simplify_unsplit(&welded, target);
-    let source = source.iter().map(|&w| representative[w as usize]).collect();
+    let (simplified, source) = simplify_unsplit(&weld.template, target);
+    let source = source
+        .iter()
+        .map(|&w| weld.representative[w as usize])
+        .collect();
     (simplified, source)
 }
 
@@ -337,11 +348,16 @@ pub fn train_data(
     let skeleton = capture.skeleton.clone();
     let j = skeleton.len();
     check_initial(capture, initial)?;
-    let (template, source) = simplify_template(&capture.template, options.train_vertices);
-    let dense = initial.to_dense();
     let full = &capture.template;
+    // Welded once: the simplification and the full-resolution count both need it.
+    let weld = split_template_weld(full);
+    let (template, source) = simplify_on_weld(full, weld.as_ref(), options.train_vertices);
+    let full_count = weld
+        .as_ref()
+        .map_or(full.vertex_count(), |w| w.template.vertex_count());
+    let dense = initial.to_dense();
     // Query cells stand in for the vertices a simplification removed; a weld removed none.
-    let queries = if template.vertex_count() < full_resolution_vertex_count(full) {
+    let queries = if template.vertex_count() < full_count {
         let normals = if full.normals.len() == full.vertex_count() {
             full.normals.clone()
         } else {
@@ -400,6 +416,7 @@ pub fn train_data(
     Ok(TrainData {
         skeleton,
         template,
+        source,
         init_weights,
         frames,
         queries,
@@ -560,6 +577,7 @@ pub(crate) mod tests {
         let mut all = q.members.clone();
         all.sort_unstable();
         assert_eq!(all, (0..n as u32).collect::<Vec<_>>());
+        assert_eq!(data.source, q.source);
         for (i, &s) in q.source.iter().enumerate() {
             let s = s as usize;
             assert_eq!(data.template.positions[i], capture.template.positions[s]);
@@ -649,8 +667,10 @@ pub(crate) mod tests {
             capture.template.triangles.len()
         );
         assert!(full.queries.is_none());
+        // The data's own map to the split template is the weld's, as the simplifier gives it.
         let (_, source) = simplify_template(split, 0);
-        for (w, &copy) in source.iter().enumerate() {
+        assert_eq!(full.source, source);
+        for (w, &copy) in full.source.iter().enumerate() {
             assert_eq!(full.template.positions[w], split.positions[copy as usize]);
             let original = corners[copy as usize] as usize;
             let rows = full.init_weights[w * j..(w + 1) * j]
@@ -666,5 +686,9 @@ pub(crate) mod tests {
         let q = coarse.queries.as_ref().unwrap();
         assert_eq!(q.positions.len(), split.vertex_count());
         assert_eq!(q.training_vertex_count(), coarse.template.vertex_count());
+        assert_eq!(coarse.source, q.source);
+        for (k, &copy) in coarse.source.iter().enumerate() {
+            assert_eq!(coarse.template.positions[k], split.positions[copy as usize]);
+        }
     }
 }

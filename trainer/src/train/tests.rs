@@ -116,6 +116,7 @@ fn scene_scaled(frames: usize, scale: f32) -> (TrainData, Vec<f32>) {
     (
         TrainData {
             skeleton,
+            source: (0..template.vertex_count() as u32).collect(),
             template,
             init_weights: init,
             frames,
@@ -787,6 +788,7 @@ fn finger_scene(joints: usize, frames: usize) -> TrainData {
         .collect();
     TrainData {
         skeleton,
+        source: (0..template.vertex_count() as u32).collect(),
         template,
         init_weights: init,
         frames,
