@@ -176,6 +176,11 @@ fn outline_offsets_are_learned_printed_and_resumed() {
         out.contains("learned outline offsets: the masks lie") && out.contains("over 4 cameras"),
         "{out}"
     );
+    // The drift of the vertices the outlines cannot check is reported beside the validation.
+    assert!(
+        out.contains("vertices on no training outline moved by up to"),
+        "{out}"
+    );
     let csv_path = tmp.path().join("m.skf.work/outline_offsets.csv");
     let csv = std::fs::read_to_string(&csv_path).unwrap();
     let lines: Vec<&str> = csv.lines().collect();

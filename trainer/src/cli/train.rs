@@ -456,6 +456,19 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
     if let Some(margin) = report.mask_margin() {
         eprintln!("warning: {margin}.");
     }
+    if let Some(drift) = trainer.hidden_drift()? {
+        println!("  {drift}");
+        if drift.is_unconfirmed() {
+            eprintln!(
+                "warning: the vertices no training view shows on its outline moved more than \
+                 {}× as far as those the images check (99th percentile); their weights are the \
+                 network's guess from their neighbours, which no image confirms. The Laplacian \
+                 (`weights.laplacian`) or the prior on hidden vertices (`weights.hidden_prior`) \
+                 holds them; more views of those parts would show them.",
+                skinfield_trainer::train::hidden::UNCONFIRMED_DRIFT_RATIO
+            );
+        }
+    }
     if let Some(worse) = report
         .guard(trainer.config().refuse_worse_than_initial)
         .map_err(|e| {

@@ -358,8 +358,8 @@ pub fn worst_vertices_markdown(
 /// `truth`; it is left out when the capture has no ground truth for its training frames.
 ///
 /// A template split into copies of its positions is scored on its weld, as training sees it
-/// ([`split_template_weld`](crate::train::data::split_template_weld)): on the split mesh every seam is an open border, which the
-/// outline test would take for the surface's edge.
+/// ([`split_template_weld`](crate::train::data::split_template_weld)): on the split mesh every
+/// seam is an open border, which the outline test would take for the surface's edge.
 pub fn terms_on_truth(
     capture: &Capture,
     methods: &[Skinning],

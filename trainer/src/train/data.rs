@@ -50,9 +50,10 @@ pub struct TrainData {
     pub skeleton: Skeleton,
     /// The (possibly reduced-resolution) template.
     pub template: Template,
-    /// Per vertex of `template`, the vertex of the capture's template it is (the first copy of
-    /// its position where a split template was welded): how a mesh posed on the capture's
-    /// template is read on this one.
+    /// Per vertex of `template`, the vertex of the template [`train_data`] was given that it is
+    /// (the first copy of its position where a split template was welded): how a mesh posed on
+    /// that template is read on this one. ([`static_train_data`] gives `train_data` the weld, so
+    /// there it indexes the weld; its [`WeldedTemplate`] maps back to the copies.)
     pub source: Vec<u32>,
     /// Initial weights, dense `[V, J]` row-major (bone heat or the asset's).
     pub init_weights: Vec<f32>,

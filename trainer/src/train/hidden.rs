@@ -67,13 +67,193 @@ pub fn hidden_gate(counts: &[u32], views: usize, fraction: f64) -> Vec<f32> {
         .collect()
 }
 
+/// Hidden vertices whose 99th-percentile drift exceeds the seen ones' by more than this factor
+/// are reported as unconfirmed ([`HiddenDrift::is_unconfirmed`]). Measured: the default
+/// SkinNet and static models of the seven zoo characters and of the built-in captures' three
+/// seeds have ratios of 0.05–1.15; the twelve silhouettes-alone models of the built-in
+/// captures, whose hidden knees end 10–13 cm further off the true surface than bone heat's worst
+/// vertex on novel motions, 1.41–7.8 (docs/experiments/fidelity.md, "How far the hidden
+/// vertices move").
+pub const UNCONFIRMED_DRIFT_RATIO: f32 = 1.3;
+
+/// How far a model moves the vertices no training outline shows from where the initial weights
+/// put them, against the vertices the outlines do show: a warning that needs no ground truth.
+///
+/// Each vertex's drift is its largest distance, over the training frames, between the template
+/// posed by the model's weights and by the initial weights. The seen vertices' drift is checked
+/// by the images (the validation scores their outlines); the hidden ones' is the network's
+/// extrapolation from its neighbours, which no image confirms. Where the hidden vertices move
+/// much further than any the images check, the model has carried weights where it cannot know
+/// them (silhouettes alone put the built-in character's knees under the skirt on the hips).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HiddenDrift {
+    /// Vertices on no training outline when posed by the initial weights.
+    pub hidden: usize,
+    /// The other vertices.
+    pub seen: usize,
+    /// The 99th percentile of the hidden vertices' drift (model units).
+    pub hidden_p99: f32,
+    /// The 99th percentile of the seen vertices' drift (model units).
+    pub seen_p99: f32,
+    /// The largest drift of a hidden vertex (model units).
+    pub hidden_max: f32,
+    /// The template's bounding-box diagonal (model units), for figures relative to its size.
+    pub diagonal: f32,
+}
+
+impl HiddenDrift {
+    /// The summary of per-vertex drifts `drift` split by `hidden`; `None` when either group is
+    /// empty or the lengths differ.
+    #[must_use]
+    pub fn from_drifts(drift: &[f32], hidden: &[bool], diagonal: f32) -> Option<Self> {
+        if drift.len() != hidden.len() {
+            return None;
+        }
+        let group = |h: bool| -> Vec<f32> {
+            let mut d: Vec<f32> = drift
+                .iter()
+                .zip(hidden)
+                .filter(|&(_, &x)| x == h)
+                .map(|(&d, _)| d)
+                .collect();
+            d.sort_by(f32::total_cmp);
+            d
+        };
+        let (hidden_drift, seen_drift) = (group(true), group(false));
+        if hidden_drift.is_empty() || seen_drift.is_empty() {
+            return None;
+        }
+        // The sorted values' nearest rank below the 99th percentile.
+        let p99 = |d: &[f32]| d[(d.len() - 1) * 99 / 100];
+        Some(Self {
+            hidden: hidden_drift.len(),
+            seen: seen_drift.len(),
+            hidden_p99: p99(&hidden_drift),
+            seen_p99: p99(&seen_drift),
+            hidden_max: hidden_drift[hidden_drift.len() - 1],
+            diagonal,
+        })
+    }
+
+    /// Whether the hidden vertices moved further than the images can confirm: their 99th
+    /// percentile above [`UNCONFIRMED_DRIFT_RATIO`] times the seen vertices'.
+    #[must_use]
+    pub fn is_unconfirmed(&self) -> bool {
+        self.hidden_p99 > UNCONFIRMED_DRIFT_RATIO * self.seen_p99
+    }
+}
+
+impl std::fmt::Display for HiddenDrift {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let pct = |x: f32| 100.0 * x / self.diagonal.max(f32::MIN_POSITIVE);
+        write!(
+            f,
+            "the {} vertices on no training outline moved by up to {:.2} % of the size from the \
+             initial skinning on the training poses (99th percentile {:.2} %; the {} seen \
+             vertices' {:.2} %)",
+            self.hidden,
+            pct(self.hidden_max),
+            pct(self.hidden_p99),
+            self.seen,
+            pct(self.seen_p99)
+        )
+    }
+}
+
+impl super::Trainer {
+    /// The drift of the current weights' hidden vertices against the seen ones
+    /// ([`HiddenDrift`]) on the training template and frames; `None` when every vertex is seen
+    /// or none is.
+    pub fn hidden_drift(&self) -> Result<Option<HiddenDrift>, super::TrainError> {
+        let t = &self.data.template;
+        let (v, j) = (t.vertex_count(), self.data.skeleton.len());
+        let (counts, _) = outline_view_counts(&self.data, &self.data.init_weights, &self.edges);
+        let hidden: Vec<bool> = counts.iter().map(|&c| c == 0).collect();
+        let mut drift = vec![0f32; v];
+        let frames: Vec<usize> = (0..self.data.frames.len()).collect();
+        // A few frames at a time: the weights of every frame at once are `F·V·J` floats.
+        for batch in frames.chunks(8) {
+            let w: Vec<f32> = self
+                .weights_at(batch, None)?
+                .to_dtype(candle_core::DType::F32)?
+                .flatten_all()?
+                .to_vec1()?;
+            for (b, &f) in batch.iter().enumerate() {
+                let skinning = &self.data.frames[f].skinning;
+                let model = pose(&t.positions, &w[b * v * j..(b + 1) * v * j], skinning);
+                let initial = pose(&t.positions, &self.data.init_weights, skinning);
+                for ((d, m), i) in drift.iter_mut().zip(&model).zip(&initial) {
+                    *d = d.max(m.distance(*i));
+                }
+            }
+        }
+        Ok(HiddenDrift::from_drifts(
+            &drift,
+            &hidden,
+            self.diagonal as f32,
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use glam::{Mat4, Vec3};
     use skinfield_formats::{Camera, Template};
 
     use super::*;
+    use crate::train::TrainConfig;
     use crate::train::tests::scene;
+
+    #[test]
+    fn drift_is_unconfirmed_only_where_hidden_vertices_move_further_than_seen_ones() {
+        // 200 seen vertices drifting 0..2 (99th percentile at rank 197: 1.97), 100 hidden.
+        let seen: Vec<f32> = (0..200).map(|i| i as f32 * 0.01).collect();
+        let summary = |hidden_drift: &[f32]| {
+            let drift: Vec<f32> = seen.iter().chain(hidden_drift).copied().collect();
+            let hidden: Vec<bool> = (0..drift.len()).map(|i| i >= seen.len()).collect();
+            HiddenDrift::from_drifts(&drift, &hidden, 10.0).unwrap()
+        };
+        let like_seen: Vec<f32> = (0..100).map(|i| i as f32 * 0.02).collect();
+        let calm = summary(&like_seen);
+        assert_eq!((calm.hidden, calm.seen), (100, 200));
+        assert!((calm.seen_p99 - 1.97).abs() < 1e-5, "{}", calm.seen_p99);
+        assert!((calm.hidden_p99 - 1.96).abs() < 1e-5, "{}", calm.hidden_p99);
+        assert!((calm.hidden_max - 1.98).abs() < 1e-5);
+        assert!(!calm.is_unconfirmed());
+        // Carried 1.2 times as far: within what the default models show; 1.4 times: flagged.
+        let scaled = |k: f32| like_seen.iter().map(|d| k * d).collect::<Vec<f32>>();
+        assert!(!summary(&scaled(1.2)).is_unconfirmed());
+        assert!(summary(&scaled(1.4)).is_unconfirmed());
+        // The same hidden vertices carried three times as far: flagged.
+        let carried: Vec<f32> = like_seen.iter().map(|d| 3.0 * d).collect();
+        let far = summary(&carried);
+        assert!(far.is_unconfirmed());
+        assert!(far.to_string().contains("59.40 %"), "{far}");
+        // Nothing to compare: every vertex seen, or none, or mismatched lengths.
+        assert!(HiddenDrift::from_drifts(&seen, &vec![false; seen.len()], 1.0).is_none());
+        assert!(HiddenDrift::from_drifts(&seen, &vec![true; seen.len()], 1.0).is_none());
+        assert!(HiddenDrift::from_drifts(&seen, &[true], 1.0).is_none());
+    }
+
+    #[test]
+    fn weights_that_stay_at_the_initial_ones_do_not_drift() {
+        // The static baseline's logits start at the initial weights (to `static_epsilon`), so
+        // no vertex moves; the tube seen by one camera has vertices on its outline and others
+        // facing the camera or away.
+        let (data, _) = scene(2);
+        let config = TrainConfig {
+            static_epsilon: 1e-7,
+            ..crate::train::tests::config()
+        };
+        let trainer = crate::train::Trainer::new(data, config, true).unwrap();
+        let d = trainer
+            .hidden_drift()
+            .unwrap()
+            .expect("seen and hidden vertices");
+        assert!(d.hidden > 0 && d.seen > 0);
+        assert!(d.hidden_max < 1e-5 * d.diagonal, "{d}");
+        assert!(d.seen_p99 < 1e-5 * d.diagonal, "{d}");
+    }
 
     #[test]
     fn the_gate_counts_views_up_to_the_fraction() {
