@@ -1,5 +1,7 @@
-//! The vertices no training outline shows, and the gate that restricts the prior on the initial
-//! weights to them (`LossWeights::hidden_prior`).
+//! The vertices no training outline shows: the gate that restricts the prior on the initial
+//! weights to them (`LossWeights::hidden_prior`), and how far a trained model moved them
+//! against the vertices the outlines check ([`HiddenDrift`], reported by every training
+//! command).
 //!
 //! A silhouette term moves a vertex's weights only in the views where the vertex lies on the
 //! mesh's projected outline (its boundary set and the contour's nearest edges are both made of
