@@ -158,7 +158,12 @@ fn simplify_on_weld(
 /// target 0): the positions of a split template, every vertex of the others.
 #[must_use]
 pub fn full_resolution_vertex_count(template: &Template) -> usize {
-    split_template_weld(template).map_or(template.vertex_count(), |w| w.template.vertex_count())
+    vertex_count_on_weld(template, split_template_weld(template).as_ref())
+}
+
+/// [`full_resolution_vertex_count`] given the template's [`split_template_weld`].
+fn vertex_count_on_weld(template: &Template, weld: Option<&WeldedTemplate>) -> usize {
+    weld.map_or(template.vertex_count(), |w| w.template.vertex_count())
 }
 
 /// [`simplify_template`] for a template not split into copies of its positions.
@@ -353,9 +358,7 @@ pub fn train_data(
     // Welded once: the simplification and the full-resolution count both need it.
     let weld = split_template_weld(full);
     let (template, source) = simplify_on_weld(full, weld.as_ref(), options.train_vertices);
-    let full_count = weld
-        .as_ref()
-        .map_or(full.vertex_count(), |w| w.template.vertex_count());
+    let full_count = vertex_count_on_weld(full, weld.as_ref());
     let dense = initial.to_dense();
     // Query cells stand in for the vertices a simplification removed; a weld removed none.
     let queries = if template.vertex_count() < full_count {

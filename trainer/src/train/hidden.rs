@@ -227,8 +227,7 @@ mod tests {
         assert!(!summary(&scaled(1.2)).is_unconfirmed());
         assert!(summary(&scaled(1.4)).is_unconfirmed());
         // The same hidden vertices carried three times as far: flagged.
-        let carried: Vec<f32> = like_seen.iter().map(|d| 3.0 * d).collect();
-        let far = summary(&carried);
+        let far = summary(&scaled(3.0));
         assert!(far.is_unconfirmed());
         assert!(far.to_string().contains("59.40 %"), "{far}");
         // Nothing to compare: every vertex seen, or none, or mismatched lengths.
