@@ -449,8 +449,9 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
     }
     if let Some((hidden, total)) = trainer.hidden_vertices() {
         println!(
-            "  the prior on hidden vertices held {hidden} of the {total} training vertices (on \
-             no training outline when posed by the initial weights)"
+            "  {hidden} of the {total} training vertices are on no training outline when posed \
+             by the initial weights (the hidden vertices `weights.hidden_prior` and \
+             `weights.hidden_drift` act on)"
         );
     }
     if let Some(margin) = report.mask_margin() {
@@ -462,9 +463,10 @@ pub fn check_validation(trainer: &Trainer) -> anyhow::Result<()> {
             eprintln!(
                 "warning: the vertices no training view shows on its outline moved more than \
                  {}× as far as those the images check (99th percentile); their weights are the \
-                 network's guess from their neighbours, which no image confirms. The Laplacian \
-                 (`weights.laplacian`) or the prior on hidden vertices (`weights.hidden_prior`) \
-                 holds them; more views of those parts would show them.",
+                 network's guess from their neighbours, which no image confirms. The hinge on \
+                 their drift (`weights.hidden_drift`), the Laplacian (`weights.laplacian`) or the \
+                 prior on hidden vertices (`weights.hidden_prior`) holds them; more views of \
+                 those parts would show them.",
                 skinfield_trainer::train::hidden::UNCONFIRMED_DRIFT_RATIO
             );
         }

@@ -56,6 +56,19 @@ pub struct LossWeights {
     /// neighbours through the Laplacian, which is what they should do (the baseline with the
     /// prior scored 0.739 cm against 0.671 without, the built-in capture's seed 0).
     pub hidden_prior: f64,
+    /// A hinge on how far the vertices no training outline shows move from the initial
+    /// skinning, beyond [`TrainConfig::hidden_drift_ratio`] times the seen vertices' 99th
+    /// percentile in the same batch ([`crate::train::hidden::drift_hinge`]): squared excess
+    /// over the squared bounding-box diagonal, per vertex and frame. SkinNet only, as
+    /// [`Self::hidden_prior`].
+    ///
+    /// On by default (1e4; measured 2026-12-07, docs/experiments/fidelity.md, "A hinge on the
+    /// hidden vertices' drift"): silhouettes without the Laplacian then score 0.591 / 0.532 /
+    /// 0.619 cm on the built-in capture's seed 0 (training seeds 0–2) against bone heat's 1.003
+    /// and 1.236 / 0.983 / 1.026 without it, and the full method 0.558 / 0.554 / 0.549 against
+    /// 0.555 / 0.562 / 0.557 (captures and training seeds 0–2). At 1e6 it holds the seen
+    /// vertices back too (silhouettes alone 0.805 cm on training seed 2).
+    pub hidden_drift: f64,
 }
 
 impl Default for LossWeights {
@@ -68,6 +81,7 @@ impl Default for LossWeights {
             partwise: 0.0,
             prior: 0.0,
             hidden_prior: 0.0,
+            hidden_drift: 1e4,
         }
     }
 }
@@ -174,10 +188,14 @@ pub struct TrainConfig {
     /// (`null` in JSON or infinite: no gate; [`crate::candidates::candidate_sets`]).
     #[serde(with = "reach_serde")]
     pub candidate_reach: f32,
-    /// With [`LossWeights::hidden_prior`]: a vertex counts as hidden when the template posed by
-    /// the initial weights has it on its outline in at most this fraction of the training views
-    /// (frames × cameras); 0: on none ([`super::hidden`]).
+    /// With [`LossWeights::hidden_prior`] or [`LossWeights::hidden_drift`]: a vertex counts as
+    /// hidden when the template posed by the initial weights has it on its outline in at most
+    /// this fraction of the training views (frames × cameras); 0: on none ([`super::hidden`]).
     pub hidden_view_fraction: f64,
+    /// With [`LossWeights::hidden_drift`]: how many times the seen vertices' 99th-percentile
+    /// drift the hidden ones may move before the hinge acts (by default the ratio above which
+    /// [`crate::train::hidden::HiddenDrift`] warns).
+    pub hidden_drift_ratio: f64,
     /// Training frames held out for validation from images ([`super::validation`]), spread
     /// evenly; at most a quarter of the frames, none (validate on the training frames) with
     /// fewer than four. 0 turns validation and best-average selection off.
@@ -292,6 +310,7 @@ impl Default for TrainConfig {
             candidate_joints: crate::candidates::DEFAULT_CANDIDATES,
             candidate_reach: crate::candidates::DEFAULT_NEIGHBOUR_REACH,
             hidden_view_fraction: 0.0,
+            hidden_drift_ratio: f64::from(crate::train::hidden::UNCONFIRMED_DRIFT_RATIO),
             validation_frames: 4,
             validation_every: 100,
             refuse_worse_than_initial: true,
@@ -464,6 +483,9 @@ impl TrainConfig {
         if !(0.0..=1.0).contains(&self.hidden_view_fraction) {
             return Err("hidden_view_fraction");
         }
+        if !(self.hidden_drift_ratio.is_finite() && self.hidden_drift_ratio > 0.0) {
+            return Err("hidden_drift_ratio");
+        }
         if self.validation_frames > 0 && self.validation_every == 0 {
             return Err("validation_every");
         }
@@ -479,6 +501,7 @@ impl TrainConfig {
             (w.partwise, "weights.partwise"),
             (w.prior, "weights.prior"),
             (w.hidden_prior, "weights.hidden_prior"),
+            (w.hidden_drift, "weights.hidden_drift"),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(f);

@@ -20,6 +20,7 @@
 //! objective move under the optimiser). A vertex is hidden when it lies on the outline in at
 //! most `hidden_view_fraction` of the training views (frames × cameras).
 
+use candle_core::{DType, Tensor};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -162,6 +163,50 @@ impl std::fmt::Display for HiddenDrift {
     }
 }
 
+/// The hinge on the hidden vertices' drift (`LossWeights::hidden_drift`): for every frame of
+/// the batch and every hidden vertex, `max(0, d − r)²`, where `d` is the vertex's distance
+/// between `posed` and `initial` (both `[B, V, 3]`) and `r` is `ratio` times the 99th
+/// percentile of the seen vertices' distances in the same batch; summed, divided by `B·V` and
+/// the squared `diagonal`. `gate` is the hidden vertices' `[1, V, 1]` indicator, `seen` its
+/// complement as a list of vertex indices.
+///
+/// Why a hinge and not the prior: the prior on the initial weights holds the hidden vertices
+/// where bone heat put them, also where the Laplacian would carry the seen vertices'
+/// correction onto them, and costs the full method 4–38 %; the hinge leaves them free to move
+/// as far as the vertices the images check do, and only stops the network from carrying them
+/// further than any image confirms, which is what [`HiddenDrift`] warns about after training.
+/// `r` is measured on the batch itself and carries no gradient, so the seen vertices are not
+/// pushed to move further to make room.
+pub fn drift_hinge(
+    posed: &Tensor,
+    initial: &Tensor,
+    gate: &Tensor,
+    seen: &[u32],
+    ratio: f64,
+    diagonal: f64,
+) -> candle_core::Result<Tensor> {
+    let (b, v, _) = posed.dims3()?;
+    // A floor under the squared distance keeps the square root's gradient finite at zero.
+    let floor = (1e-6 * diagonal).powi(2);
+    let distance = ((posed - initial)?.sqr()?.sum_keepdim(2)? + floor)?.sqrt()?;
+    let r = {
+        let d: Vec<Vec<f32>> = distance.squeeze(2)?.to_dtype(DType::F32)?.to_vec2()?;
+        let mut s: Vec<f32> = d
+            .iter()
+            .flat_map(|row| seen.iter().map(move |&i| row[i as usize]))
+            .collect();
+        if s.is_empty() {
+            return Tensor::zeros((), posed.dtype(), posed.device());
+        }
+        s.sort_by(f32::total_cmp);
+        ratio * f64::from(s[(s.len() - 1) * 99 / 100])
+    };
+    let excess = (distance - r)?
+        .relu()?
+        .broadcast_mul(&gate.to_dtype(posed.dtype())?)?;
+    excess.sqr()?.sum_all()? / ((b * v) as f64 * diagonal * diagonal)
+}
+
 impl super::Trainer {
     /// The drift of the current weights' hidden vertices against the seen ones
     /// ([`HiddenDrift`]) on the training template and frames; `None` when every vertex is seen
@@ -169,15 +214,25 @@ impl super::Trainer {
     pub fn hidden_drift(&self) -> Result<Option<HiddenDrift>, super::TrainError> {
         let t = &self.data.template;
         let (v, j) = (t.vertex_count(), self.data.skeleton.len());
-        let (counts, _) = outline_view_counts(&self.data, &self.data.init_weights, &self.edges);
-        let hidden: Vec<bool> = counts.iter().map(|&c| c == 0).collect();
+        let hidden: Vec<bool> = match &self.hidden_gate {
+            // The hinge's and the prior's set, counted at set-up, is this one when it admits no
+            // outline view.
+            Some(gate) if self.config.hidden_view_fraction == 0.0 => {
+                gate.gate.iter().map(|&g| g > 0.0).collect()
+            }
+            _ => {
+                let (counts, _) =
+                    outline_view_counts(&self.data, &self.data.init_weights, &self.edges);
+                counts.iter().map(|&c| c == 0).collect()
+            }
+        };
         let mut drift = vec![0f32; v];
         let frames: Vec<usize> = (0..self.data.frames.len()).collect();
         // A few frames at a time: the weights of every frame at once are `F·V·J` floats.
         for batch in frames.chunks(8) {
             let w: Vec<f32> = self
                 .weights_at(batch, None)?
-                .to_dtype(candle_core::DType::F32)?
+                .to_dtype(DType::F32)?
                 .flatten_all()?
                 .to_vec1()?;
             for (b, &f) in batch.iter().enumerate() {
@@ -234,6 +289,74 @@ mod tests {
         assert!(HiddenDrift::from_drifts(&seen, &vec![false; seen.len()], 1.0).is_none());
         assert!(HiddenDrift::from_drifts(&seen, &vec![true; seen.len()], 1.0).is_none());
         assert!(HiddenDrift::from_drifts(&seen, &[true], 1.0).is_none());
+    }
+
+    #[test]
+    fn the_drift_hinge_acts_only_beyond_the_seen_vertices_reach_with_its_analytic_gradient() {
+        use candle_core::{Device, Var};
+        // Two frames of five vertices: 0–2 seen, 3–4 hidden. Each vertex moves along x only,
+        // by these distances from its initial position.
+        let moves: [[f64; 5]; 2] = [[0.1, 0.2, 0.3, 0.5, 0.2], [0.4, 0.0, 0.2, 1.0, 0.7]];
+        let (ratio, diagonal) = (1.5, 2.0);
+        let initial: Vec<f64> = (0..30).map(|i| f64::from(i) * 0.1).collect();
+        let mut posed = initial.clone();
+        for (f, row) in moves.iter().enumerate() {
+            for (v, m) in row.iter().enumerate() {
+                posed[(f * 5 + v) * 3] += m;
+            }
+        }
+        let dev = Device::Cpu;
+        let posed = Var::from_vec(posed, (2, 5, 3), &dev).unwrap();
+        let initial = Tensor::from_vec(initial, (2, 5, 3), &dev).unwrap();
+        let gate = Tensor::from_vec(vec![0.0f32, 0.0, 0.0, 1.0, 1.0], (1, 5, 1), &dev).unwrap();
+        let hinge =
+            |p: &Tensor| drift_hinge(p, &initial, &gate, &[0, 1, 2], ratio, diagonal).unwrap();
+        let loss = hinge(posed.as_tensor());
+        // The seen distances 0.1 0.2 0.3 0.4 0 0.2: their 99th percentile (nearest rank
+        // below) is 0.3, so r = 0.45; beyond it: 0.05, 0.55 and 0.25 (vertex 4 in frame 0,
+        // 0.2, is within reach).
+        let expected = (0.05f64.powi(2) + 0.55f64.powi(2) + 0.25f64.powi(2)) / (10.0 * 4.0);
+        let value = loss.to_scalar::<f64>().unwrap();
+        assert!(
+            (value - expected).abs() < 1e-9,
+            "{value} against {expected}"
+        );
+        let grads = loss.backward().unwrap();
+        let g: Vec<f64> = grads
+            .get(&posed)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        // Analytic: 2 (d − r) / (B·V·diag²) along x for a hidden vertex beyond reach, else 0.
+        for (f, row) in moves.iter().enumerate() {
+            for (v, &m) in row.iter().enumerate() {
+                let beyond = v >= 3 && m > 0.45;
+                let want = if beyond { 2.0 * (m - 0.45) / 40.0 } else { 0.0 };
+                let i = (f * 5 + v) * 3;
+                assert!(
+                    (g[i] - want).abs() < 1e-9,
+                    "frame {f} vertex {v}: {} against {want}",
+                    g[i]
+                );
+                assert!(g[i + 1].abs() < 1e-12 && g[i + 2].abs() < 1e-12);
+            }
+        }
+        // A finite difference on a hidden coordinate agrees (the seen ones fix r).
+        let h = 1e-6;
+        let mut bumped: Vec<f64> = posed.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
+        bumped[(5 + 3) * 3] += h;
+        let bumped = Tensor::from_vec(bumped, (2, 5, 3), &dev).unwrap();
+        let fd = (hinge(&bumped).to_scalar::<f64>().unwrap() - value) / h;
+        assert!(
+            (fd - g[(5 + 3) * 3]).abs() < 1e-6,
+            "{fd} against {}",
+            g[(5 + 3) * 3]
+        );
+        // No seen vertex: nothing to measure against, no term.
+        let none = drift_hinge(posed.as_tensor(), &initial, &gate, &[], ratio, diagonal).unwrap();
+        assert_eq!(none.to_scalar::<f64>().unwrap(), 0.0);
     }
 
     #[test]

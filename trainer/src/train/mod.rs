@@ -112,7 +112,8 @@ pub struct Trainer {
     /// With [`TrainData::queries`]: `Σ_j w_init ln w_init` of every full-resolution row, so a
     /// batch of query rows sums its constant instead of copying its weights out each step.
     query_neg_entropy: Vec<f64>,
-    /// With [`LossWeights::hidden_prior`]: the training vertices no training outline shows.
+    /// With [`LossWeights::hidden_prior`] or [`LossWeights::hidden_drift`]: the training
+    /// vertices no training outline shows.
     hidden_gate: Option<HiddenGate>,
     /// Time per phase of the iterations run so far.
     profile: StepProfile,
@@ -168,12 +169,15 @@ pub struct WarmSettings {
     pub position_weight: f64,
 }
 
-/// The vertices [`LossWeights::hidden_prior`] holds ([`hidden`]).
+/// The vertices [`LossWeights::hidden_prior`] and [`LossWeights::hidden_drift`] hold
+/// ([`hidden`]).
 struct HiddenGate {
     /// 1 for each training vertex no training outline shows, else 0, as `[1, V, 1]`.
     tensor: Tensor,
     /// The same as numbers, `[V]`.
     gate: Vec<f32>,
+    /// The other training vertices' indices.
+    seen: Vec<u32>,
     /// `Σ w_init ln w_init` over the gated vertices' initial weights, divided by `V`: the
     /// constant that turns their cross-entropy into a KL divergence when the batch is the
     /// training vertices themselves (no query rows).
@@ -354,8 +358,11 @@ impl Trainer {
         let triangles: Arc<[[u32; 3]]> = t.triangles.clone().into();
         let rest = rest_homogeneous(&t.positions, &dev)?;
         let init = Tensor::from_vec(data.init_weights.clone(), (1, v, j), &dev)?;
-        // SkinNet only (`LossWeights::hidden_prior`).
-        let hidden_gate = if config.weights.hidden_prior > 0.0 && !static_weights {
+        // SkinNet only (`LossWeights::hidden_prior`, `LossWeights::hidden_drift`).
+        let hidden_gate = if (config.weights.hidden_prior > 0.0
+            || config.weights.hidden_drift > 0.0)
+            && !static_weights
+        {
             let (counts, views) = hidden::outline_view_counts(&data, &data.init_weights, &edges);
             let gate = hidden::hidden_gate(&counts, views, config.hidden_view_fraction);
             let entropy: f64 = data
@@ -365,8 +372,13 @@ impl Trainer {
                 .filter(|&(_, &g)| g > 0.0)
                 .map(|(row, _)| crate::losses::prior::neg_entropy(row))
                 .sum();
+            let seen = (0u32..)
+                .zip(&gate)
+                .filter(|&(_, &g)| g == 0.0)
+                .map(|(i, _)| i);
             Some(HiddenGate {
                 tensor: Tensor::from_vec(gate.clone(), (1, v, 1), &dev)?,
+                seen: seen.collect(),
                 gate,
                 init_entropy: entropy / v.max(1) as f64,
             })
@@ -446,8 +458,9 @@ impl Trainer {
         }
     }
 
-    /// With [`LossWeights::hidden_prior`]: how many of the training template's vertices the
-    /// prior holds (on no training outline, [`hidden`]), and the template's vertex count.
+    /// With [`LossWeights::hidden_prior`] or [`LossWeights::hidden_drift`]: how many of the
+    /// training template's vertices they act on (on no training outline, [`hidden`]), and the
+    /// template's vertex count.
     #[must_use]
     pub fn hidden_vertices(&self) -> Option<(usize, usize)> {
         self.hidden_gate

@@ -26,20 +26,23 @@ pub struct LossRecord {
     /// `KL(w_init ‖ w)` summed over the hidden vertices, per template vertex (nats; 0 without
     /// [`crate::train::LossWeights::hidden_prior`]).
     pub hidden_prior: f64,
+    /// The hinge on the hidden vertices' drift (squared excess over the squared diagonal, per
+    /// vertex and frame; 0 without [`crate::train::LossWeights::hidden_drift`]).
+    pub hidden_drift: f64,
 }
 
 impl LossRecord {
     /// CSV header matching [`LossRecord::csv_row`].
     pub const CSV_HEADER: &'static str = concat!(
         "iteration,total,silhouette_boundary,silhouette_contour,laplacian,skinning,partwise,",
-        "prior,hidden_prior"
+        "prior,hidden_prior,hidden_drift"
     );
 
     /// One CSV row.
     #[must_use]
     pub fn csv_row(&self) -> String {
         format!(
-            "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
+            "{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
             self.iteration,
             self.total,
             self.silhouette_boundary,
@@ -48,7 +51,8 @@ impl LossRecord {
             self.skinning,
             self.partwise,
             self.prior,
-            self.hidden_prior
+            self.hidden_prior,
+            self.hidden_drift
         )
     }
 }

@@ -161,12 +161,16 @@ impl Trainer {
         timer.lap(&mut self.profile, kind, Phase::Silhouette);
         let v = self.data.template.vertex_count() as f64;
         let init = self.init_at(query.as_ref())?;
-        let lap_input = match self.config.laplacian_reference {
-            LaplacianReference::Absolute => posed.clone(),
+        let lw = self.config.weights;
+        let drift_gate = self.hidden_gate.as_ref().filter(|_| lw.hidden_drift > 0.0);
+        let initial_posed = match (self.config.laplacian_reference, drift_gate) {
+            (LaplacianReference::Absolute, None) => None,
+            _ => Some(self.initial_posing(&init, &skinning, &rest, b)?),
+        };
+        let lap_input = match (self.config.laplacian_reference, &initial_posed) {
             // The operator is linear: δ(x) − δ(x_init) = δ(x − x_init).
-            LaplacianReference::InitialSkinning => {
-                (&posed - self.initial_posing(&init, &skinning, &rest, b)?)?
-            }
+            (LaplacianReference::InitialSkinning, Some(initial)) => (&posed - initial)?,
+            _ => posed.clone(),
         };
         // Relative to the character's size (`LossWeights::laplacian`).
         let lap =
@@ -176,10 +180,23 @@ impl Trainer {
         let (prior, init_entropy) = self.prior_cross_entropy(&w, &init, query.as_ref(), None)?;
         // The prior restricted to the vertices no training outline shows (SkinNet only).
         let (hidden_prior, hidden_entropy) = match &self.hidden_gate {
-            Some(gate) => self.prior_cross_entropy(&w, &init, query.as_ref(), Some(gate))?,
-            None => (Tensor::zeros((), w.dtype(), w.device())?, 0.0),
+            Some(gate) if lw.hidden_prior > 0.0 => {
+                self.prior_cross_entropy(&w, &init, query.as_ref(), Some(gate))?
+            }
+            _ => (Tensor::zeros((), w.dtype(), w.device())?, 0.0),
         };
-        let lw = self.config.weights;
+        // The hinge on their drift beyond the seen vertices' (SkinNet only).
+        let hidden_drift = match (drift_gate, &initial_posed) {
+            (Some(gate), Some(initial)) => hidden::drift_hinge(
+                &posed,
+                initial,
+                &gate.tensor,
+                &gate.seen,
+                self.config.hidden_drift_ratio,
+                self.diagonal,
+            )?,
+            _ => Tensor::zeros((), w.dtype(), w.device())?,
+        };
         let weighted = [
             (&sb, lw.silhouette_boundary),
             (&sc, lw.silhouette_contour),
@@ -188,6 +205,7 @@ impl Trainer {
             (&part, lw.partwise),
             (&prior, lw.prior),
             (&hidden_prior, lw.hidden_prior),
+            (&hidden_drift, lw.hidden_drift),
         ];
         // Every term is logged; one of weight 0 stays out of the total, so the backward pass
         // does not run through it (multiplied by 0 it would, for nothing). Only when every
@@ -226,6 +244,7 @@ impl Trainer {
             partwise: val(&part)?,
             prior: val(&prior)? + init_entropy,
             hidden_prior: val(&hidden_prior)? + hidden_entropy,
+            hidden_drift: val(&hidden_drift)?,
         };
         let grads = objective.backward()?;
         timer.lap(&mut self.profile, kind, Phase::Backward);

@@ -1165,7 +1165,14 @@ fn the_hidden_prior_holds_only_the_vertices_no_outline_shows_and_logs_their_kl()
     // Off, or on the static baseline (whose weights are free per vertex), the term is logged as
     // a zero and holds nothing.
     let (data, _) = scene(1);
-    let mut idle = Trainer::new(data.clone(), config(), false).unwrap();
+    let off = TrainConfig {
+        weights: LossWeights {
+            hidden_drift: 0.0,
+            ..LossWeights::default()
+        },
+        ..config()
+    };
+    let mut idle = Trainer::new(data.clone(), off, false).unwrap();
     assert!(idle.hidden_gate.is_none());
     assert_eq!(idle.step().unwrap().hidden_prior, 0.0);
     let baseline = Trainer::new(data, t.config().clone(), true).unwrap();
@@ -1679,4 +1686,95 @@ fn outline_offsets_can_be_set_before_a_run_goes_on() {
     let mut t = Trainer::new(data, off, false).unwrap();
     assert_eq!(t.outline_offsets().unwrap(), None);
     assert!(t.set_outline_offsets(&[0.75]).is_err());
+}
+
+#[test]
+fn the_drift_hinge_logs_the_hidden_vertices_excess_over_the_seen_ones_reach_and_shrinks_it() {
+    // No warm start: SkinNet's first weights move every vertex of the tube away from the initial
+    // skinning; the hinge is the only term.
+    let (data, _) = scene(1);
+    let init = data.init_weights.clone();
+    let (positions, skinning) = (
+        data.template.positions.clone(),
+        data.frames[0].skinning.clone(),
+    );
+    let cfg = TrainConfig {
+        hidden_drift_ratio: 0.5,
+        ..priors_only(LossWeights {
+            hidden_drift: 1e4,
+            ..LossWeights::default()
+        })
+    };
+    let (ratio, mut t) = (
+        cfg.hidden_drift_ratio,
+        Trainer::new(data, cfg, false).unwrap(),
+    );
+    let gate = t.hidden_gate.as_ref().unwrap().gate.clone();
+    let diagonal = t.diagonal;
+    // The hinge recomputed in f64 from the model's posed vertices (one frame, so the batch of
+    // two is that frame twice and the mean over it is the frame's).
+    let excess = |t: &Trainer| {
+        let w: Vec<f32> = t
+            .weights(&[0])
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let model = super::validation::pose(&positions, &w, &skinning);
+        let initial = super::validation::pose(&positions, &init, &skinning);
+        let d: Vec<f64> = model
+            .iter()
+            .zip(&initial)
+            .map(|(m, i)| f64::from(m.distance(*i)))
+            .collect();
+        let mut seen: Vec<f64> = d
+            .iter()
+            .zip(&gate)
+            .filter(|&(_, &g)| g == 0.0)
+            .map(|(&x, _)| x)
+            .collect();
+        seen.sort_by(f64::total_cmp);
+        let r = ratio * seen[(seen.len() - 1) * 99 / 100];
+        let sum: f64 = d
+            .iter()
+            .zip(&gate)
+            .filter(|&(_, &g)| g == 1.0)
+            .map(|(&x, _)| (x - r).max(0.0).powi(2))
+            .sum();
+        sum / (d.len() as f64 * diagonal * diagonal)
+    };
+    let before = excess(&t);
+    assert!(
+        before > 0.0,
+        "the hidden vertices start beyond the seen ones' reach"
+    );
+    let first = t.step().unwrap();
+    assert!(
+        (first.hidden_drift - before).abs() < 1e-3 * before,
+        "logged {} against {before}",
+        first.hidden_drift
+    );
+    assert_eq!(first.hidden_prior, 0.0);
+    for _ in 1..40 {
+        t.step().unwrap();
+    }
+    let after = excess(&t);
+    assert!(after < 0.2 * before, "excess {before} → {after}");
+    // The drift report reuses the gate counted at set-up: the same vertices as a fresh count.
+    let (counts, _) = super::hidden::outline_view_counts(&t.data, &t.data.init_weights, &t.edges);
+    let report = t.hidden_drift().unwrap().unwrap();
+    assert_eq!(report.hidden, counts.iter().filter(|&&c| c == 0).count());
+    assert_eq!(report.hidden, gate.iter().filter(|&&g| g == 1.0).count());
+    // Off, the term is logged as a zero.
+    let (data, _) = scene(1);
+    let off = TrainConfig {
+        weights: LossWeights {
+            hidden_drift: 0.0,
+            ..LossWeights::default()
+        },
+        ..config()
+    };
+    let mut idle = Trainer::new(data, off, false).unwrap();
+    assert_eq!(idle.step().unwrap().hidden_drift, 0.0);
 }
