@@ -1107,6 +1107,18 @@ fn the_prior_alone_pulls_skinnet_to_the_initial_weights_and_logs_its_kl() {
     assert_eq!(idle.step().unwrap().prior, logged_idle);
 }
 
+/// [`config`] with the hinge on the hidden vertices' drift off (on by default), so no term
+/// needs the hidden vertices.
+fn without_hidden_terms() -> TrainConfig {
+    TrainConfig {
+        weights: LossWeights {
+            hidden_drift: 0.0,
+            ..LossWeights::default()
+        },
+        ..config()
+    }
+}
+
 #[test]
 fn the_hidden_prior_holds_only_the_vertices_no_outline_shows_and_logs_their_kl() {
     // The tube seen from the front: its sides are on the outline, its front and back are not.
@@ -1165,14 +1177,7 @@ fn the_hidden_prior_holds_only_the_vertices_no_outline_shows_and_logs_their_kl()
     // Off, or on the static baseline (whose weights are free per vertex), the term is logged as
     // a zero and holds nothing.
     let (data, _) = scene(1);
-    let off = TrainConfig {
-        weights: LossWeights {
-            hidden_drift: 0.0,
-            ..LossWeights::default()
-        },
-        ..config()
-    };
-    let mut idle = Trainer::new(data.clone(), off, false).unwrap();
+    let mut idle = Trainer::new(data.clone(), without_hidden_terms(), false).unwrap();
     assert!(idle.hidden_gate.is_none());
     assert_eq!(idle.step().unwrap().hidden_prior, 0.0);
     let baseline = Trainer::new(data, t.config().clone(), true).unwrap();
@@ -1768,13 +1773,6 @@ fn the_drift_hinge_logs_the_hidden_vertices_excess_over_the_seen_ones_reach_and_
     assert_eq!(report.hidden, gate.iter().filter(|&&g| g == 1.0).count());
     // Off, the term is logged as a zero.
     let (data, _) = scene(1);
-    let off = TrainConfig {
-        weights: LossWeights {
-            hidden_drift: 0.0,
-            ..LossWeights::default()
-        },
-        ..config()
-    };
-    let mut idle = Trainer::new(data, off, false).unwrap();
+    let mut idle = Trainer::new(data, without_hidden_terms(), false).unwrap();
     assert_eq!(idle.step().unwrap().hidden_drift, 0.0);
 }
