@@ -8,8 +8,9 @@
 //! w/ fixed vertex colours (stage 1, then stage 4 with colours read from the first training
 //! frame's images); ours (stages 1–4); ours with fewer cameras (stages 1–4 on the first
 //! `--ablation-cameras` cameras); silhouettes only (every regulariser off, the Laplacian and
-//! the hinge on the hidden vertices' drift included: stage 1 from the warm start, then stage 4 without the rendering term when the
-//! configuration runs it at full resolution, otherwise stage 1 for both stages' iterations).
+//! the hinge on the hidden vertices' drift included: stage 1 from the warm start, then stage 4
+//! without the rendering term when the configuration runs it at full resolution, otherwise
+//! stage 1 for both stages' iterations).
 //! With the default full-resolution stage 4 every stage-4 row runs on the full template.
 //! The rows with every camera but the last share one stage-1 run (its checkpoint), so they
 //! differ only in what follows it; the variants continue from that run's last parameter
@@ -311,11 +312,11 @@ fn export_best_and_score(
 
 /// The "silhouettes only" row: the training as configured with the Laplacian, the skinning
 /// regularisers, both priors on the initial weights and the hinge on the hidden vertices' drift
-/// off, so the row says what the silhouette
-/// terms alone do to the weights. When the base configuration runs stage 4 at full resolution
-/// (the default) so does this row, with the same iterations and without the rendering term;
-/// otherwise stage 1 runs for as many image iterations as stage 1 and stage 4 together. Stage 1
-/// trains on `data`, stage 4 on `stage_data` (the full template's).
+/// off, so the row says what the silhouette terms alone do to the weights. When the base
+/// configuration runs stage 4 at full resolution (the default) so does this row, with the same
+/// iterations and without the rendering term; otherwise stage 1 runs for as many image
+/// iterations as stage 1 and stage 4 together. Stage 1 trains on `data`, stage 4 on
+/// `stage_data` (the full template's).
 fn silhouettes_only(
     capture: &Capture,
     data: &TrainData,

@@ -113,27 +113,21 @@ impl HiddenDrift {
             return None;
         }
         let group = |h: bool| -> Vec<f32> {
-            let mut d: Vec<f32> = drift
+            drift
                 .iter()
                 .zip(hidden)
                 .filter(|&(_, &x)| x == h)
                 .map(|(&d, _)| d)
-                .collect();
-            d.sort_by(f32::total_cmp);
-            d
+                .collect()
         };
-        let (hidden_drift, seen_drift) = (group(true), group(false));
-        if hidden_drift.is_empty() || seen_drift.is_empty() {
-            return None;
-        }
-        // The sorted values' nearest rank below the 99th percentile.
-        let p99 = |d: &[f32]| d[(d.len() - 1) * 99 / 100];
+        let (mut hidden_drift, mut seen_drift) = (group(true), group(false));
+        let hidden_max = hidden_drift.iter().copied().reduce(f32::max)?;
         Some(Self {
             hidden: hidden_drift.len(),
             seen: seen_drift.len(),
-            hidden_p99: p99(&hidden_drift),
-            seen_p99: p99(&seen_drift),
-            hidden_max: hidden_drift[hidden_drift.len() - 1],
+            hidden_p99: percentile_99(&mut hidden_drift)?,
+            seen_p99: percentile_99(&mut seen_drift)?,
+            hidden_max,
             diagonal,
         })
     }
@@ -163,6 +157,14 @@ impl std::fmt::Display for HiddenDrift {
     }
 }
 
+/// The value at the nearest rank below the 99th percentile of `values` (reordered in place);
+/// `None` when empty. The drift report and the hinge share it, so the hinge acts exactly
+/// where the report's ratio would warn.
+fn percentile_99(values: &mut [f32]) -> Option<f32> {
+    let rank = values.len().checked_sub(1)? * 99 / 100;
+    Some(*values.select_nth_unstable_by(rank, f32::total_cmp).1)
+}
+
 /// The hinge on the hidden vertices' drift (`LossWeights::hidden_drift`): for every frame of
 /// the batch and every hidden vertex, `max(0, d − r)²`, where `d` is the vertex's distance
 /// between `posed` and `initial` (both `[B, V, 3]`) and `r` is `ratio` times the 99th
@@ -189,18 +191,15 @@ pub fn drift_hinge(
     // A floor under the squared distance keeps the square root's gradient finite at zero.
     let floor = (1e-6 * diagonal).powi(2);
     let distance = ((posed - initial)?.sqr()?.sum_keepdim(2)? + floor)?.sqrt()?;
-    let r = {
-        let d: Vec<Vec<f32>> = distance.squeeze(2)?.to_dtype(DType::F32)?.to_vec2()?;
-        let mut s: Vec<f32> = d
-            .iter()
-            .flat_map(|row| seen.iter().map(move |&i| row[i as usize]))
-            .collect();
-        if s.is_empty() {
-            return Tensor::zeros((), posed.dtype(), posed.device());
-        }
-        s.sort_by(f32::total_cmp);
-        ratio * f64::from(s[(s.len() - 1) * 99 / 100])
+    let d: Vec<Vec<f32>> = distance.squeeze(2)?.to_dtype(DType::F32)?.to_vec2()?;
+    let mut seen_distance: Vec<f32> = d
+        .iter()
+        .flat_map(|row| seen.iter().map(move |&i| row[i as usize]))
+        .collect();
+    let Some(seen_p99) = percentile_99(&mut seen_distance) else {
+        return Tensor::zeros((), posed.dtype(), posed.device());
     };
+    let r = ratio * f64::from(seen_p99);
     let excess = (distance - r)?
         .relu()?
         .broadcast_mul(&gate.to_dtype(posed.dtype())?)?;
