@@ -208,7 +208,7 @@ pub fn run(
             } else {
                 format!("ours, {cameras} cameras")
             };
-            let dir = out.join(format!("ablation-{}", name.replace(['/', ' ', ','], "_")));
+            let dir = row_dir(out, &name);
             let t = Instant::now();
             let config = TrainConfig {
                 stages: v.stages,
@@ -242,18 +242,9 @@ pub fn run(
             rows.push((row, seconds));
         }
         if cameras == 0 {
-            for row in [SilhouetteRow::Alone, SilhouetteRow::WithDriftHinge] {
-                let context = SilhouetteRunContext {
-                    capture,
-                    data: &data,
-                    stage_data,
-                    base: &base,
-                    args,
-                    out,
-                    progress,
-                };
-                rows.push(silhouettes_only(&context, row)?);
-            }
+            rows.extend(silhouette_rows(
+                capture, &data, stage_data, &base, args, out, progress,
+            )?);
         }
     }
 
@@ -321,20 +312,15 @@ fn export_best_and_score(
     eval_row(capture, &Skinning::Skf(path), name)
 }
 
-/// What both silhouette rows share: the capture, stage 1's and stage 4's training data, the
-/// base configuration, the ablation options and the output folder.
-#[derive(Clone, Copy)]
-struct SilhouetteRunContext<'a> {
-    capture: &'a Capture,
-    data: &'a TrainData,
-    stage_data: &'a TrainData,
-    base: &'a TrainConfig,
-    args: &'a AblationArgs,
-    out: &'a Path,
-    progress: bool,
+/// The work folder of the row `name` in `out`.
+fn row_dir(out: &Path, name: &str) -> std::path::PathBuf {
+    out.join(format!(
+        "ablation-{}",
+        name.replace(['/', ' ', ',', '+'], "_")
+    ))
 }
 
-/// Which of the two silhouette rows [`silhouettes_only`] trains.
+/// Which of the two silhouette rows [`silhouette_rows`] trains.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum SilhouetteRow {
     /// Every regulariser off, the hinge on the hidden vertices' drift included.
@@ -372,7 +358,8 @@ impl SilhouetteRow {
     }
 }
 
-/// A silhouettes row: the training as configured with the Laplacian, the skinning
+/// The two silhouettes rows, [`SilhouetteRow::Alone`] then [`SilhouetteRow::WithDriftHinge`]:
+/// the training as configured with the Laplacian, the skinning
 /// regularisers, both priors on the initial weights and (for [`SilhouetteRow::Alone`]) the hinge
 /// on the hidden vertices' drift off, so the row says what the silhouette terms alone do to the
 /// weights (with the hinge: what they do where some training outline sees). When the base
@@ -380,53 +367,56 @@ impl SilhouetteRow {
 /// iterations and without the rendering term; otherwise stage 1 runs for as many image
 /// iterations as stage 1 and stage 4 together. Stage 1 trains on `data`, stage 4 on
 /// `stage_data` (the full template's).
-fn silhouettes_only(
-    context: &SilhouetteRunContext,
-    row: SilhouetteRow,
-) -> anyhow::Result<(EvalRow, f64)> {
-    let SilhouetteRunContext {
-        capture,
-        data,
-        stage_data,
-        base,
-        args,
-        out,
-        progress,
-    } = *context;
-    let name = row.name();
-    let dir = out.join(format!("ablation-{}", name.replace(['+', ' '], "_")));
-    let weights = row.weights(&base.weights);
-    let config = if base.stages.full_resolution {
-        TrainConfig {
-            weights,
-            stages: StageConfig {
-                refine_iterations: args.refine_iterations,
-                rendering_weight: 0.0,
-                full_resolution: true,
-                ..StageConfig::default()
-            },
-            ..base.clone()
+fn silhouette_rows(
+    capture: &Capture,
+    data: &TrainData,
+    stage_data: &TrainData,
+    base: &TrainConfig,
+    args: &AblationArgs,
+    out: &Path,
+    progress: bool,
+) -> anyhow::Result<Vec<(EvalRow, f64)>> {
+    let mut rows = Vec::new();
+    for row in [SilhouetteRow::Alone, SilhouetteRow::WithDriftHinge] {
+        let name = row.name();
+        let dir = row_dir(out, name);
+        let weights = row.weights(&base.weights);
+        let config = if base.stages.full_resolution {
+            TrainConfig {
+                weights,
+                stages: StageConfig {
+                    refine_iterations: args.refine_iterations,
+                    rendering_weight: 0.0,
+                    full_resolution: true,
+                    ..StageConfig::default()
+                },
+                ..base.clone()
+            }
+        } else {
+            TrainConfig {
+                iterations: base.iterations + args.refine_iterations,
+                weights,
+                stages: StageConfig::default(),
+                ..base.clone()
+            }
+        };
+        let t = Instant::now();
+        let mut trainer = Trainer::new(data.clone(), config, false)?;
+        trainer.run(&dir, progress)?;
+        trainer.adopt_average()?;
+        if trainer.config().stages.any() {
+            trainer = trainer.with_data(stage_data.clone())?;
+            trainer.run_stages(Vec::new(), &dir, progress)?;
         }
-    } else {
-        TrainConfig {
-            iterations: base.iterations + args.refine_iterations,
-            weights,
-            stages: StageConfig::default(),
-            ..base.clone()
-        }
-    };
-    let t = Instant::now();
-    let mut trainer = Trainer::new(data.clone(), config, false)?;
-    trainer.run(&dir, progress)?;
-    trainer.adopt_average()?;
-    if trainer.config().stages.any() {
-        trainer = trainer.with_data(stage_data.clone())?;
-        trainer.run_stages(Vec::new(), &dir, progress)?;
+        let seconds = t.elapsed().as_secs_f64();
+        let scored = export_best_and_score(&mut trainer, &dir, capture, name)?;
+        println!(
+            "{name}: Chamfer {:.3} cm ({seconds:.0} s)",
+            scored.chamfer_cm
+        );
+        rows.push((scored, seconds));
     }
-    let seconds = t.elapsed().as_secs_f64();
-    let row = export_best_and_score(&mut trainer, &dir, capture, name)?;
-    println!("{name}: Chamfer {:.3} cm ({seconds:.0} s)", row.chamfer_cm);
-    Ok((row, seconds))
+    Ok(rows)
 }
 
 #[cfg(test)]
@@ -468,5 +458,21 @@ mod tests {
             SilhouetteRow::Alone.name(),
             SilhouetteRow::WithDriftHinge.name()
         );
+    }
+
+    #[test]
+    fn every_row_has_its_own_work_folder_named_after_it() {
+        let out = Path::new("abl");
+        let names = [
+            "w/o L_rend",
+            "ours, 4 cameras",
+            SilhouetteRow::Alone.name(),
+            SilhouetteRow::WithDriftHinge.name(),
+        ];
+        let dirs: Vec<_> = names.iter().map(|n| row_dir(out, n)).collect();
+        assert_eq!(dirs[0], out.join("ablation-w_o_L_rend"));
+        assert_eq!(dirs[1], out.join("ablation-ours__4_cameras"));
+        assert_eq!(dirs[2], out.join("ablation-silhouettes_only"));
+        assert_eq!(dirs[3], out.join("ablation-silhouettes___drift_hinge"));
     }
 }
